@@ -1,0 +1,281 @@
+//! One UAV agent: its tree, learner and communication state for every trial.
+//!
+//! [`UavAgent::act`] turns one [`Observation`] into one [`Action`]; it is the whole agent
+//! side of a barrier round, and the in-process runner and the `agent` process call exactly
+//! this. Episode boundaries are read from the observation: when a trial's episode or phase
+//! changes, the agent closes the previous episode (a truncated one bootstraps from the
+//! state it was cut in, using the flags relayed with the boundary) and starts afresh.
+
+use crate::bt::spec::TreeSpec;
+use crate::bt::status::Status;
+use crate::bt::tree::{TickContext, Tree, TreeError};
+use crate::comm::{outgoing_flags, CommMode, CommState};
+use crate::learning::{LearnParams, StateId};
+use crate::state::StateSpace;
+use crate::uav::Body;
+use flockstep_proto::{
+    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_AGENTS,
+    MAX_TRIALS,
+};
+use flockstep_world::scenario::Scenario;
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::sync::Arc;
+
+/// Everything that defines one agent of a run.
+#[derive(Debug, Clone)]
+pub struct AgentSpec {
+    /// Agent slot, 0-based (UAV1 is slot 0); it flies route `slot` of the scenario.
+    pub slot: usize,
+    pub scenario: Arc<Scenario>,
+    pub tree: TreeSpec,
+    pub comm: CommMode,
+    pub params: LearnParams,
+    /// The run's seed; each trial's stream is derived from it.
+    pub seed: u64,
+    pub trials: usize,
+}
+
+/// Why an agent cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    #[error(transparent)]
+    Tree(#[from] TreeError),
+    #[error("agent slot {slot} has no route: scenario `{scenario}` has {routes} routes")]
+    NoRoute { slot: usize, scenario: String, routes: usize },
+    #[error("{trials} trials requested; between 1 and {max} are supported")]
+    Trials { trials: usize, max: usize },
+    #[error("{0}")]
+    Params(String),
+}
+
+/// The tree's view of the UAV during one tick.
+struct UavTick<'a> {
+    body: Body<'a>,
+    states: &'a mut StateSpace,
+    comm: &'a CommState,
+    state: Option<StateId>,
+}
+
+impl TickContext for UavTick<'_> {
+    #[inline]
+    fn tick_action(&mut self, leaf: u16, progress: &mut u32) -> Status {
+        let before = self.body.pose;
+        let status = self.body.tick_action(leaf, progress);
+        if self.body.pose != before {
+            self.state = None;
+        }
+        status
+    }
+
+    #[inline]
+    fn halt_action(&mut self, _leaf: u16, progress: &mut u32) {
+        self.body.halt_action(progress);
+    }
+
+    #[inline]
+    fn check_condition(&mut self, leaf: u16) -> bool {
+        self.body.check_condition(leaf)
+    }
+
+    #[inline]
+    fn rl_state(&mut self) -> StateId {
+        *self.state.get_or_insert_with(|| self.states.id(self.body.pose, self.comm.words()))
+    }
+}
+
+/// One agent in one trial.
+#[derive(Debug, Clone)]
+pub struct TrialAgent {
+    slot: usize,
+    route_len: usize,
+    tree: Tree,
+    states: StateSpace,
+    comm: CommState,
+    train_params: LearnParams,
+    /// The pose after this agent's last commands (the state a truncated episode ends in).
+    pose: Pose,
+    /// The (phase, episode) in progress and not yet closed.
+    open: Option<(u8, u64)>,
+    /// This agent ran `A-endEpisode` in the open episode and hovers.
+    finished: bool,
+}
+
+impl TrialAgent {
+    fn new(spec: &AgentSpec, trial: usize) -> Result<TrialAgent, AgentError> {
+        let rng = Xoshiro256PlusPlus::seed_from_u64(seed::derive(
+            spec.seed,
+            &[seed::AGENT, spec.slot as u64, trial as u64],
+        ));
+        let route_lens: Vec<usize> =
+            (0..spec.scenario.n_routes()).map(|r| spec.scenario.route_len(r)).collect();
+        Ok(TrialAgent {
+            slot: spec.slot,
+            route_len: spec.scenario.route_len(spec.slot),
+            tree: Tree::new(&spec.tree, spec.params, rng)?,
+            states: StateSpace::default(),
+            comm: CommState::new(spec.comm, spec.slot, &route_lens),
+            train_params: spec.params,
+            pose: spec.scenario.start_pose(),
+            open: None,
+            finished: false,
+        })
+    }
+
+    /// One tick of this trial: reads `obs`, writes this agent's part of the action.
+    pub fn act(&mut self, obs: &TrialObservation, live: u64, out: &mut TrialAction) -> Result<(), FieldError> {
+        out.clear();
+        let view = &obs.agents[self.slot];
+        view.pose.validate(self.route_len)?;
+        flockstep_proto::check_below("observation.phase", obs.phase.into(), 2)?;
+        if obs.done != 0 {
+            self.close_episode(obs, live)?;
+            return Ok(());
+        }
+        if self.open != Some((obs.phase, obs.episode)) {
+            self.close_episode(obs, live)?;
+            self.start_episode(obs.phase);
+            self.open = Some((obs.phase, obs.episode));
+        } else {
+            self.hear(obs, live)?;
+        }
+        self.pose = view.pose;
+        let sees_target = view.sees_target == 1;
+        out.flags = outgoing_flags(view.pose.waypoint, sees_target);
+        if self.finished {
+            return Ok(());
+        }
+        let mut ctx = UavTick {
+            body: Body { pose: self.pose, route_len: self.route_len, sees_target, ended: false, action: out },
+            states: &mut self.states,
+            comm: &self.comm,
+            state: None,
+        };
+        self.tree.tick(&mut ctx);
+        self.pose = ctx.body.pose;
+        if ctx.body.ended {
+            self.finished = true;
+            self.tree.end_episode_terminal();
+        }
+        Ok(())
+    }
+
+    /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
+    fn hear(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
+        for peer in 0..MAX_AGENTS {
+            if peer != self.slot && live & (1 << peer) != 0 {
+                self.comm.hear(peer, &obs.agents[peer].flags)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Closes the open episode, if any. If this agent did not finish it, the episode was
+    /// truncated: the pending learning steps bootstrap from the state it ended in, which
+    /// includes the flags sent in its last tick (relayed with this observation).
+    fn close_episode(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
+        if self.open.take().is_none() {
+            return Ok(());
+        }
+        if !self.finished {
+            self.hear(obs, live)?;
+            let last = self.states.id(self.pose, self.comm.words());
+            self.tree.end_episode_truncated(last);
+        }
+        Ok(())
+    }
+
+    fn start_episode(&mut self, phase: u8) {
+        let params = match Phase::from_u8(phase) {
+            Some(Phase::Eval) => LearnParams::greedy(),
+            _ => self.train_params,
+        };
+        self.tree.set_params(params);
+        self.comm.reset();
+        self.finished = false;
+        let mut scratch = TrialAction::default();
+        let mut ctx = UavTick {
+            body: Body { pose: self.pose, route_len: self.route_len, sees_target: false, ended: false, action: &mut scratch },
+            states: &mut self.states,
+            comm: &self.comm,
+            state: None,
+        };
+        self.tree.halt(&mut ctx);
+    }
+
+    pub fn slot(&self) -> usize {
+        self.slot
+    }
+
+    pub fn tree(&self) -> &Tree {
+        &self.tree
+    }
+
+    pub fn tree_mut(&mut self) -> &mut Tree {
+        &mut self.tree
+    }
+
+    pub fn states(&self) -> &StateSpace {
+        &self.states
+    }
+
+    pub fn set_states(&mut self, states: StateSpace) {
+        self.states = states;
+    }
+}
+
+/// One UAV agent: one [`TrialAgent`] per trial.
+#[derive(Debug, Clone)]
+pub struct UavAgent {
+    slot: usize,
+    trials: Vec<TrialAgent>,
+}
+
+impl UavAgent {
+    pub fn new(spec: &AgentSpec) -> Result<UavAgent, AgentError> {
+        if spec.slot >= spec.scenario.n_routes() {
+            return Err(AgentError::NoRoute {
+                slot: spec.slot,
+                scenario: spec.scenario.name().to_string(),
+                routes: spec.scenario.n_routes(),
+            });
+        }
+        if spec.trials == 0 || spec.trials > MAX_TRIALS {
+            return Err(AgentError::Trials { trials: spec.trials, max: MAX_TRIALS });
+        }
+        spec.params.validate().map_err(AgentError::Params)?;
+        let trials = (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
+        Ok(UavAgent { slot: spec.slot, trials })
+    }
+
+    pub fn slot(&self) -> usize {
+        self.slot
+    }
+
+    /// The agent's half of a barrier round: one trial action per trial.
+    pub fn act(&mut self, obs: &Observation, out: &mut Action) -> Result<(), FieldError> {
+        flockstep_proto::check_below("observation.n_trials", obs.n_trials.into(), self.trials.len() as u64 + 1)?;
+        if obs.n_trials as usize != self.trials.len() {
+            return Err(FieldError {
+                field: "observation.n_trials",
+                value: obs.n_trials.into(),
+                expected: format!("{}", self.trials.len()),
+            });
+        }
+        out.round = obs.round;
+        out.agent = self.slot as u32;
+        out.n_trials = obs.n_trials;
+        for (k, trial) in self.trials.iter_mut().enumerate() {
+            trial.act(&obs.trials[k], obs.live, &mut out.trials[k])?;
+        }
+        Ok(())
+    }
+
+    pub fn trials(&self) -> &[TrialAgent] {
+        &self.trials
+    }
+
+    pub fn trials_mut(&mut self) -> &mut [TrialAgent] {
+        &mut self.trials
+    }
+}

@@ -1,0 +1,581 @@
+//! A behavior tree at run time: tick semantics, halting, and the learning selector.
+//!
+//! The [`TreeSpec`] is flattened into an arena of nodes whose run-time state (running or
+//! not, memory index, parallel results, decorator counters, action progress) sits next to
+//! the node. Leaves run through a [`TickContext`] callback, so the tree does no I/O and knows
+//! nothing of UAVs: the same engine drives the agent, the tests and `agent bt replay`.
+//!
+//! Semantics (SPEC 1.2, agreeing with BehaviorTree.CPP): `AND`/`OR` are reactive
+//! (ReactiveSequence / ReactiveFallback), `AND*`/`OR*` resume at their running child
+//! (Sequence / Fallback), `PAR` stops ticking a child once it finished and returns as soon as
+//! its threshold is met, `REPEAT` and `RETRY` loop within one tick while the child finishes.
+//! A node that was RUNNING and is not reached, or is preempted, is halted; halting an action
+//! resets its progress. The learning selector is described on [`Tree::tick_learning`].
+
+use super::spec::{LeafId, NodeKind, NodeSpec, TreeSpec};
+use super::status::Status;
+use crate::learning::{LearnParams, QTable, StateId};
+use flockstep_proto::MAX_COMMANDS;
+use rand::Rng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// Index of a node in the flattened tree (pre-order: the root is 0).
+pub type NodeId = u32;
+
+/// What the tree asks of its owner while it ticks.
+pub trait TickContext {
+    /// Ticks action `leaf`; `progress` is the leaf's own state (0 when idle).
+    fn tick_action(&mut self, leaf: LeafId, progress: &mut u32) -> Status;
+    /// Halts a RUNNING action: it must forget its progress.
+    fn halt_action(&mut self, leaf: LeafId, progress: &mut u32);
+    /// Evaluates condition `leaf` (conditions never return RUNNING).
+    fn check_condition(&mut self, leaf: LeafId) -> bool;
+    /// The agent's RL state as it is now (learning selectors observe it on every tick).
+    fn rl_state(&mut self) -> StateId;
+    /// Observes the tick for debugging (`agent bt replay`); free when not overridden.
+    #[inline]
+    fn trace(&mut self, _event: TraceEvent) {}
+}
+
+/// What [`TickContext::trace`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceEvent {
+    /// `node` was ticked and returned `status`.
+    Ticked { node: NodeId, status: Status },
+    /// `node` was RUNNING and has been halted.
+    Halted { node: NodeId },
+    /// A learning selector ordered or stepped: it chose child number `child` (0-based).
+    Chose { node: NodeId, child: u32 },
+}
+
+/// Why a tree cannot run.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TreeError {
+    #[error("{file}:{line}: this tree may issue up to {worst} commands in one tick; the limit is {limit} (a REPEAT/RETRY count or many actions under one node)")]
+    TooManyCommands { file: String, line: usize, worst: u64, limit: usize },
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Op {
+    Sequence,
+    SequenceMemory,
+    Fallback,
+    FallbackMemory,
+    Learning { lor: u32 },
+    Parallel { success_threshold: u32 },
+    Inverter,
+    ForceSuccess,
+    ForceFailure,
+    Repeat { times: u32 },
+    Retry { attempts: u32 },
+    Action { leaf: LeafId },
+    Condition { leaf: LeafId },
+}
+
+#[derive(Debug, Clone)]
+struct Node {
+    op: Op,
+    /// Children are `children[first..first + count]`.
+    first: u32,
+    count: u32,
+    /// The node returned RUNNING on its last tick and has not been halted since.
+    running: bool,
+    /// Memory child index, decorator counter, or action progress.
+    memory: u32,
+}
+
+/// Run-time state of one learning selector.
+#[derive(Debug, Clone)]
+struct Lor {
+    table: QTable,
+    /// Child (0-based position) that returned RUNNING on the previous tick.
+    running_child: Option<u32>,
+    /// The step waiting for its next state: (s, child).
+    pending: Option<(StateId, u32)>,
+}
+
+/// A behavior tree ready to tick, with its learning selectors' Q-tables and RNG.
+#[derive(Debug, Clone)]
+pub struct Tree {
+    nodes: Vec<Node>,
+    children: Vec<NodeId>,
+    /// Parallel nodes: per child slot, 0 = not finished, 1 = SUCCESS, 2 = FAILURE.
+    finished: Vec<u8>,
+    /// Node id -> source line and label, for traces and errors.
+    labels: Vec<(usize, String)>,
+    lors: Vec<Lor>,
+    params: LearnParams,
+    rng: Xoshiro256PlusPlus,
+    /// Scratch: which children a learning selector has tried in this tick.
+    tried: Vec<bool>,
+}
+
+impl Tree {
+    /// Builds the run-time tree. `rng` orders the learning selectors' children.
+    pub fn new(
+        spec: &TreeSpec,
+        params: LearnParams,
+        rng: Xoshiro256PlusPlus,
+    ) -> Result<Tree, TreeError> {
+        let worst = worst_case_commands(&spec.root);
+        if worst > MAX_COMMANDS as u64 {
+            return Err(TreeError::TooManyCommands {
+                file: spec.source.clone(),
+                line: spec.root.line,
+                worst,
+                limit: MAX_COMMANDS,
+            });
+        }
+        let mut tree = Tree {
+            nodes: Vec::new(),
+            children: Vec::new(),
+            finished: Vec::new(),
+            labels: Vec::new(),
+            lors: Vec::new(),
+            params,
+            rng,
+            tried: Vec::new(),
+        };
+        tree.flatten(&spec.root);
+        tree.finished = vec![0; tree.children.len()];
+        let widest = tree.lors.iter().map(|l| l.table.n_actions()).max().unwrap_or(0);
+        tree.tried = vec![false; widest];
+        Ok(tree)
+    }
+
+    /// Pre-order flattening; children of a node get contiguous slots in `children`.
+    fn flatten(&mut self, spec: &NodeSpec) -> NodeId {
+        let id = self.nodes.len() as NodeId;
+        let op = match &spec.kind {
+            NodeKind::Sequence { memory: false } => Op::Sequence,
+            NodeKind::Sequence { memory: true } => Op::SequenceMemory,
+            NodeKind::Fallback { memory: false } => Op::Fallback,
+            NodeKind::Fallback { memory: true } => Op::FallbackMemory,
+            NodeKind::Learning => {
+                self.lors.push(Lor {
+                    table: QTable::new(spec.children.len()),
+                    running_child: None,
+                    pending: None,
+                });
+                Op::Learning { lor: self.lors.len() as u32 - 1 }
+            }
+            NodeKind::Parallel { success_threshold } => {
+                Op::Parallel { success_threshold: *success_threshold as u32 }
+            }
+            NodeKind::Inverter => Op::Inverter,
+            NodeKind::ForceSuccess => Op::ForceSuccess,
+            NodeKind::ForceFailure => Op::ForceFailure,
+            NodeKind::Repeat { times } => Op::Repeat { times: *times },
+            NodeKind::Retry { attempts } => Op::Retry { attempts: *attempts },
+            NodeKind::Action { leaf, .. } => Op::Action { leaf: *leaf },
+            NodeKind::Condition { leaf, .. } => Op::Condition { leaf: *leaf },
+        };
+        self.nodes.push(Node { op, first: 0, count: 0, running: false, memory: 0 });
+        self.labels.push((spec.line, label(&spec.kind)));
+        let first = self.children.len();
+        self.children.extend(std::iter::repeat_n(0, spec.children.len()));
+        for (i, child) in spec.children.iter().enumerate() {
+            let child_id = self.flatten(child);
+            self.children[first + i] = child_id;
+        }
+        let node = &mut self.nodes[id as usize];
+        node.first = first as u32;
+        node.count = spec.children.len() as u32;
+        id
+    }
+
+    /// Ticks the tree once from the root.
+    pub fn tick(&mut self, ctx: &mut impl TickContext) -> Status {
+        self.tick_node(0, ctx)
+    }
+
+    /// Halts every running node (e.g. when an episode ends) without learning from it.
+    pub fn halt(&mut self, ctx: &mut impl TickContext) {
+        self.halt_node(0, ctx);
+    }
+
+    /// The episode ended because the UAV finished: every pending learning step gets the
+    /// terminal update (no bootstrap), so the choice that revealed the target gets credit.
+    pub fn end_episode_terminal(&mut self) {
+        let params = self.params;
+        for lor in &mut self.lors {
+            if let Some((s, a)) = lor.pending.take() {
+                if params.learn {
+                    lor.table.terminal(s, a as usize, &params);
+                }
+            }
+        }
+    }
+
+    /// The episode was cut by the tick cap in state `last`: pending steps bootstrap from it.
+    pub fn end_episode_truncated(&mut self, last: StateId) {
+        let params = self.params;
+        for lor in &mut self.lors {
+            if let Some((s, a)) = lor.pending.take() {
+                if params.learn {
+                    lor.table.bootstrap(s, a as usize, last, &params);
+                }
+            }
+        }
+    }
+
+    pub fn params(&self) -> LearnParams {
+        self.params
+    }
+
+    pub fn set_params(&mut self, params: LearnParams) {
+        self.params = params;
+    }
+
+    /// The learning selectors' Q-tables, in pre-order.
+    pub fn tables(&self) -> Vec<&QTable> {
+        self.lors.iter().map(|l| &l.table).collect()
+    }
+
+    /// Replaces the Q-tables (loading a snapshot). Shapes must match.
+    pub fn set_tables(&mut self, tables: Vec<QTable>) -> Result<(), String> {
+        if tables.len() != self.lors.len() {
+            return Err(format!(
+                "snapshot has {} learning selectors, the tree has {}",
+                tables.len(),
+                self.lors.len()
+            ));
+        }
+        for (i, (lor, table)) in self.lors.iter().zip(&tables).enumerate() {
+            if lor.table.n_actions() != table.n_actions() {
+                return Err(format!(
+                    "learning selector {} has {} children, its snapshot table {}",
+                    i + 1,
+                    lor.table.n_actions(),
+                    table.n_actions()
+                ));
+            }
+        }
+        for (lor, table) in self.lors.iter_mut().zip(tables) {
+            lor.table = table;
+        }
+        Ok(())
+    }
+
+    /// Source line and label (`A-rotate`, `PAR m=2`...) of a node.
+    pub fn label(&self, node: NodeId) -> (usize, &str) {
+        let (line, label) = &self.labels[node as usize];
+        (*line, label)
+    }
+
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    #[inline]
+    fn child(&self, node: NodeId, i: u32) -> NodeId {
+        self.children[(self.nodes[node as usize].first + i) as usize]
+    }
+
+    fn tick_node(&mut self, id: NodeId, ctx: &mut impl TickContext) -> Status {
+        let node = &self.nodes[id as usize];
+        let status = match node.op {
+            Op::Condition { leaf } => {
+                if ctx.check_condition(leaf) {
+                    Status::Success
+                } else {
+                    Status::Failure
+                }
+            }
+            Op::Action { leaf } => {
+                let mut progress = node.memory;
+                let status = ctx.tick_action(leaf, &mut progress);
+                self.nodes[id as usize].memory = progress;
+                status
+            }
+            Op::Sequence => self.tick_reactive(id, Status::Success, ctx),
+            Op::Fallback => self.tick_reactive(id, Status::Failure, ctx),
+            Op::SequenceMemory => self.tick_memory(id, Status::Success, ctx),
+            Op::FallbackMemory => self.tick_memory(id, Status::Failure, ctx),
+            Op::Learning { lor } => self.tick_learning(id, lor as usize, ctx),
+            Op::Parallel { success_threshold } => self.tick_parallel(id, success_threshold, ctx),
+            Op::Inverter => match self.tick_node(self.child(id, 0), ctx) {
+                Status::Success => Status::Failure,
+                Status::Failure => Status::Success,
+                Status::Running => Status::Running,
+            },
+            Op::ForceSuccess => match self.tick_node(self.child(id, 0), ctx) {
+                Status::Running => Status::Running,
+                _ => Status::Success,
+            },
+            Op::ForceFailure => match self.tick_node(self.child(id, 0), ctx) {
+                Status::Running => Status::Running,
+                _ => Status::Failure,
+            },
+            Op::Repeat { times } => self.tick_loop(id, times, Status::Success, ctx),
+            Op::Retry { attempts } => self.tick_loop(id, attempts, Status::Failure, ctx),
+        };
+        self.nodes[id as usize].running = status == Status::Running;
+        ctx.trace(TraceEvent::Ticked { node: id, status });
+        status
+    }
+
+    /// `AND` (`go_on` = SUCCESS) and `OR` (`go_on` = FAILURE): tick from the first child on
+    /// every tick; the first child not returning `go_on` decides, and every later child that
+    /// was still RUNNING from an earlier tick is halted (it is no longer reached).
+    fn tick_reactive(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
+        let count = self.nodes[id as usize].count;
+        for i in 0..count {
+            let status = self.tick_node(self.child(id, i), ctx);
+            if status != go_on {
+                self.halt_children_from(id, i + 1, ctx);
+                return status;
+            }
+        }
+        go_on
+    }
+
+    /// `AND*` / `OR*`: resume at the child that was RUNNING; forget it once the node
+    /// returns SUCCESS or FAILURE.
+    fn tick_memory(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
+        let count = self.nodes[id as usize].count;
+        let mut i = self.nodes[id as usize].memory;
+        while i < count {
+            let status = self.tick_node(self.child(id, i), ctx);
+            if status == Status::Running {
+                self.nodes[id as usize].memory = i;
+                return Status::Running;
+            }
+            if status != go_on {
+                self.nodes[id as usize].memory = 0;
+                return status;
+            }
+            i += 1;
+        }
+        self.nodes[id as usize].memory = 0;
+        go_on
+    }
+
+    /// `PAR n m=M`: ticks the children that have not finished, in order; SUCCESS as soon as
+    /// M succeeded, FAILURE as soon as n-M+1 failed (success is then impossible); either way
+    /// the still-running children are halted and the results forgotten.
+    fn tick_parallel(&mut self, id: NodeId, threshold: u32, ctx: &mut impl TickContext) -> Status {
+        let (first, count) = (self.nodes[id as usize].first, self.nodes[id as usize].count);
+        let slots = first as usize..(first + count) as usize;
+        let mut successes = self.finished[slots.clone()].iter().filter(|&&f| f == 1).count() as u32;
+        let mut failures = self.finished[slots.clone()].iter().filter(|&&f| f == 2).count() as u32;
+        for slot in slots.clone() {
+            if self.finished[slot] != 0 {
+                continue;
+            }
+            match self.tick_node(self.children[slot], ctx) {
+                Status::Success => {
+                    self.finished[slot] = 1;
+                    successes += 1;
+                }
+                Status::Failure => {
+                    self.finished[slot] = 2;
+                    failures += 1;
+                }
+                Status::Running => {}
+            }
+            let decided = if successes >= threshold {
+                Some(Status::Success)
+            } else if failures > count - threshold {
+                Some(Status::Failure)
+            } else {
+                None
+            };
+            if let Some(status) = decided {
+                self.halt_children_from(id, 0, ctx);
+                self.finished[slots].fill(0);
+                return status;
+            }
+        }
+        Status::Running
+    }
+
+    /// `REPEAT n` (`go_on` = SUCCESS: the child must succeed n times) and `RETRY n`
+    /// (`go_on` = FAILURE: up to n attempts). Loops within the tick while the child
+    /// finishes with `go_on`; the count survives a RUNNING child.
+    fn tick_loop(&mut self, id: NodeId, limit: u32, go_on: Status, ctx: &mut impl TickContext) -> Status {
+        let child = self.child(id, 0);
+        loop {
+            let status = self.tick_node(child, ctx);
+            if status == Status::Running {
+                return Status::Running;
+            }
+            if status != go_on {
+                self.nodes[id as usize].memory = 0;
+                return status;
+            }
+            let done = self.nodes[id as usize].memory + 1;
+            if done >= limit {
+                self.nodes[id as usize].memory = 0;
+                return go_on;
+            }
+            self.nodes[id as usize].memory = done;
+        }
+    }
+
+    /// The learning selector (SPEC 1.3). On every tick it observes the RL state s, first
+    /// completes the previous tick's learning step with s as the next state, then orders
+    /// its children by Q(s, .) from high to low (ties broken by the RNG) or, with
+    /// probability epsilon, uniformly at random, and ticks them in that order like a
+    /// selector. A child returning FAILURE is a learning step with s' = s, taken before the
+    /// next child is tried. The child returning SUCCESS or RUNNING becomes the pending step;
+    /// a child that was RUNNING on the previous tick and is not that child is halted.
+    ///
+    /// The order is drawn lazily: only as many children as are tried are ranked, which
+    /// gives the same distribution as sorting the whole list (uniform among ties).
+    fn tick_learning(&mut self, id: NodeId, lor: usize, ctx: &mut impl TickContext) -> Status {
+        let state = ctx.rl_state();
+        let params = self.params;
+        if let Some((s, a)) = self.lors[lor].pending.take() {
+            if params.learn {
+                self.lors[lor].table.bootstrap(s, a as usize, state, &params);
+            }
+        }
+        let count = self.nodes[id as usize].count;
+        let explore = params.epsilon > 0.0 && self.rng.random::<f64>() < params.epsilon;
+        self.tried[..count as usize].fill(false);
+        for remaining in (1..=count).rev() {
+            let pick = if explore {
+                self.random_untried(count, remaining)
+            } else {
+                self.best_untried(lor, state, count)
+            };
+            self.tried[pick as usize] = true;
+            ctx.trace(TraceEvent::Chose { node: id, child: pick });
+            let status = self.tick_node(self.child(id, pick), ctx);
+            if status == Status::Failure {
+                if params.learn {
+                    self.lors[lor].table.bootstrap(state, pick as usize, state, &params);
+                }
+                continue;
+            }
+            self.halt_previous_running(id, lor, pick, ctx);
+            let entry = &mut self.lors[lor];
+            entry.running_child = (status == Status::Running).then_some(pick);
+            entry.pending = Some((state, pick));
+            return status;
+        }
+        self.halt_previous_running(id, lor, u32::MAX, ctx);
+        self.lors[lor].running_child = None;
+        Status::Failure
+    }
+
+    /// The untried child with the highest Q(s, .); ties are broken uniformly by the RNG.
+    #[inline]
+    fn best_untried(&mut self, lor: usize, state: StateId, count: u32) -> u32 {
+        let table = &self.lors[lor].table;
+        let mut best = u32::MAX;
+        let mut best_q = f64::NEG_INFINITY;
+        let mut ties = 0u32;
+        for a in 0..count {
+            if self.tried[a as usize] {
+                continue;
+            }
+            let q = table.get(state, a as usize);
+            if q > best_q || best == u32::MAX {
+                best = a;
+                best_q = q;
+                ties = 1;
+            } else if q == best_q {
+                ties += 1;
+                if self.rng.random_range(0..ties) == 0 {
+                    best = a;
+                }
+            }
+        }
+        best
+    }
+
+    /// A uniformly chosen untried child, `remaining` of `count` being untried.
+    fn random_untried(&mut self, count: u32, remaining: u32) -> u32 {
+        let mut k = self.rng.random_range(0..remaining);
+        for a in 0..count {
+            if !self.tried[a as usize] {
+                if k == 0 {
+                    return a;
+                }
+                k -= 1;
+            }
+        }
+        unreachable!("remaining counts the untried children")
+    }
+
+    fn halt_previous_running(&mut self, id: NodeId, lor: usize, now: u32, ctx: &mut impl TickContext) {
+        if let Some(previous) = self.lors[lor].running_child {
+            if previous != now {
+                self.halt_node(self.child(id, previous), ctx);
+                self.lors[lor].running_child = None;
+            }
+        }
+    }
+
+    /// Halts children `from..` of `id` that are still RUNNING.
+    fn halt_children_from(&mut self, id: NodeId, from: u32, ctx: &mut impl TickContext) {
+        let count = self.nodes[id as usize].count;
+        for i in from..count {
+            self.halt_node(self.child(id, i), ctx);
+        }
+    }
+
+    /// Halts `id` if it is RUNNING: its running descendants first, then its own state.
+    fn halt_node(&mut self, id: NodeId, ctx: &mut impl TickContext) {
+        if !self.nodes[id as usize].running {
+            return;
+        }
+        let node = &self.nodes[id as usize];
+        match node.op {
+            Op::Action { leaf } => {
+                let mut progress = node.memory;
+                ctx.halt_action(leaf, &mut progress);
+                self.nodes[id as usize].memory = progress;
+            }
+            Op::Condition { .. } => {}
+            Op::Parallel { .. } => {
+                let slots = node.first as usize..(node.first + node.count) as usize;
+                self.halt_children_from(id, 0, ctx);
+                self.finished[slots].fill(0);
+            }
+            Op::Learning { lor } => {
+                self.halt_children_from(id, 0, ctx);
+                self.lors[lor as usize].running_child = None;
+            }
+            _ => self.halt_children_from(id, 0, ctx),
+        }
+        let node = &mut self.nodes[id as usize];
+        node.running = false;
+        if !matches!(node.op, Op::Action { .. }) {
+            node.memory = 0;
+        }
+        ctx.trace(TraceEvent::Halted { node: id });
+    }
+}
+
+/// Upper bound of the commands one tick can issue: each action issues at most one; loops
+/// multiply their child's bound.
+fn worst_case_commands(spec: &NodeSpec) -> u64 {
+    let children: u64 = spec.children.iter().map(worst_case_commands).sum();
+    match &spec.kind {
+        NodeKind::Action { .. } => 1,
+        NodeKind::Condition { .. } => 0,
+        NodeKind::Repeat { times } => children.saturating_mul(u64::from(*times)),
+        NodeKind::Retry { attempts } => children.saturating_mul(u64::from(*attempts)),
+        _ => children,
+    }
+}
+
+/// A node's label as the text format writes it, parameters included.
+fn label(kind: &NodeKind) -> String {
+    match kind {
+        NodeKind::Sequence { memory } => if *memory { "AND*" } else { "AND" }.to_string(),
+        NodeKind::Fallback { memory } => if *memory { "OR*" } else { "OR" }.to_string(),
+        NodeKind::Learning => "LOR".to_string(),
+        NodeKind::Parallel { success_threshold } => format!("PAR m={success_threshold}"),
+        NodeKind::Inverter => "NOT".to_string(),
+        NodeKind::ForceSuccess => "FORCE_SUCCESS".to_string(),
+        NodeKind::ForceFailure => "FORCE_FAILURE".to_string(),
+        NodeKind::Repeat { times } => format!("REPEAT n={times}"),
+        NodeKind::Retry { attempts } => format!("RETRY n={attempts}"),
+        NodeKind::Action { name, .. } => format!("A-{name}"),
+        NodeKind::Condition { name, .. } => format!("C-{name}"),
+    }
+}

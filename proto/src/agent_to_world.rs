@@ -1,0 +1,82 @@
+//! Agent -> world: the tick's commands for every trial, plus the flags the world relays.
+
+use crate::flags::Flags;
+use crate::limits::{MAX_COMMANDS, MAX_TRIALS};
+use crate::pose::Command;
+use iceoryx2::prelude::ZeroCopySend;
+
+/// One trial's part of an agent's action.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::TrialAction")]
+pub struct TrialAction {
+    /// Number of valid entries of `commands`.
+    pub n_commands: u8,
+    /// 1 if the tree ran `A-endEpisode` in this tick.
+    pub ended: u8,
+    /// `Command` codes in the order the tree issued them.
+    pub commands: [u8; MAX_COMMANDS],
+    pub _reserved: [u8; 6],
+    pub flags: Flags,
+}
+
+impl Default for TrialAction {
+    fn default() -> Self {
+        TrialAction { n_commands: 0, ended: 0, commands: [0; MAX_COMMANDS], _reserved: [0; 6], flags: Flags::default() }
+    }
+}
+
+impl TrialAction {
+    pub fn clear(&mut self) {
+        *self = TrialAction::default();
+    }
+
+    /// Appends a command; returns false if the message is full.
+    #[inline]
+    pub fn push(&mut self, command: Command) -> bool {
+        let n = self.n_commands as usize;
+        if n >= MAX_COMMANDS {
+            return false;
+        }
+        self.commands[n] = command as u8;
+        self.n_commands += 1;
+        true
+    }
+
+    /// The commands, decoded and range-checked.
+    pub fn decode_commands(&self) -> impl Iterator<Item = Result<Command, crate::FieldError>> + '_ {
+        let n = (self.n_commands as usize).min(MAX_COMMANDS);
+        let over = (self.n_commands as usize > MAX_COMMANDS).then(|| crate::FieldError {
+            field: "action.n_commands",
+            value: self.n_commands.into(),
+            expected: format!("<= {MAX_COMMANDS}"),
+        });
+        over.into_iter().map(Err).chain(self.commands[..n].iter().map(|&c| {
+            Command::from_u8(c).ok_or(crate::FieldError {
+                field: "action.command",
+                value: c.into(),
+                expected: "0..=3".into(),
+            })
+        }))
+    }
+}
+
+/// One agent's message for one barrier round.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::Action")]
+pub struct Action {
+    /// The barrier round this answers (equals the observation's `round`).
+    pub round: u64,
+    /// Sender's agent slot (0-based; agent 1 in the results is slot 0).
+    pub agent: u32,
+    /// Number of valid trials (equals the observation's).
+    pub n_trials: u32,
+    pub trials: [TrialAction; MAX_TRIALS],
+}
+
+impl Action {
+    pub fn new(agent: usize) -> Action {
+        Action { round: 0, agent: agent as u32, n_trials: 0, trials: [TrialAction::default(); MAX_TRIALS] }
+    }
+}

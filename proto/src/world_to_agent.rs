@@ -1,0 +1,131 @@
+//! World -> agents: one broadcast per barrier round with every trial and every agent slot.
+//!
+//! Each agent reads its own slot (pose, what its camera sees) and the relayed flags of its
+//! peers. One message for all agents keeps the barrier to a single publish per round.
+
+use crate::flags::Flags;
+use crate::limits::{MAX_AGENTS, MAX_TRIALS};
+use crate::pose::Pose;
+use iceoryx2::prelude::ZeroCopySend;
+
+/// One agent slot in one trial.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::AgentView")]
+pub struct AgentView {
+    /// Pose at the start of this tick.
+    pub pose: Pose,
+    /// 1 if the target cell is visible from `pose`.
+    pub sees_target: u8,
+    /// 1 if this agent has finished its episode and hovers.
+    pub finished: u8,
+    pub _reserved: [u8; 2],
+    /// The flags this agent sent in the previous tick (`valid` 0 if none).
+    pub flags: Flags,
+}
+
+/// One trial's state at the start of a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::TrialObservation")]
+pub struct TrialObservation {
+    /// Episode index (0-based) this tick belongs to.
+    pub episode: u64,
+    /// Ticks of this trial executed before this one (the trial's clock).
+    pub tick: u64,
+    /// Ticks of the current episode executed before this one (0 = episode start).
+    pub episode_tick: u32,
+    /// 1 once the trial has run its episode budget: nothing more to tick.
+    pub done: u8,
+    /// [`Phase`] as `u8`: training, or greedy evaluation of what was learned.
+    pub phase: u8,
+    pub _reserved: [u8; 2],
+    pub agents: [AgentView; MAX_AGENTS],
+}
+
+impl Default for TrialObservation {
+    fn default() -> Self {
+        TrialObservation {
+            episode: 0,
+            tick: 0,
+            episode_tick: 0,
+            done: 0,
+            phase: Phase::Train as u8,
+            _reserved: [0; 2],
+            agents: [AgentView::default(); MAX_AGENTS],
+        }
+    }
+}
+
+/// What a trial is doing: agents learn while training and act greedily (epsilon 0, no
+/// learning) while evaluating.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Phase {
+    Train = 0,
+    Eval = 1,
+}
+
+impl Phase {
+    pub fn from_u8(v: u8) -> Option<Phase> {
+        match v {
+            0 => Some(Phase::Train),
+            1 => Some(Phase::Eval),
+            _ => None,
+        }
+    }
+}
+
+/// What a round asks of the agents.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum ObservationKind {
+    /// Tick every trial that is not done and answer with an action.
+    Tick = 0,
+    /// The run is over: finish learning from the last tick, write results, exit.
+    Stop = 1,
+}
+
+/// The broadcast of one barrier round.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::Observation")]
+pub struct Observation {
+    /// Barrier round, counting from 0; actions answer it by echoing it.
+    pub round: u64,
+    /// Bit i set: agent slot i is part of the barrier in this round.
+    pub live: u64,
+    /// [`ObservationKind`] as `u8`.
+    pub kind: u8,
+    pub _reserved: [u8; 3],
+    /// Number of valid entries of `trials`.
+    pub n_trials: u32,
+    pub trials: [TrialObservation; MAX_TRIALS],
+}
+
+impl Default for Observation {
+    fn default() -> Self {
+        Observation {
+            round: 0,
+            live: 0,
+            kind: ObservationKind::Tick as u8,
+            _reserved: [0; 3],
+            n_trials: 0,
+            trials: [TrialObservation::default(); MAX_TRIALS],
+        }
+    }
+}
+
+impl Observation {
+    pub fn kind(&self) -> Option<ObservationKind> {
+        match self.kind {
+            0 => Some(ObservationKind::Tick),
+            1 => Some(ObservationKind::Stop),
+            _ => None,
+        }
+    }
+
+    pub fn is_live(&self, agent: usize) -> bool {
+        agent < MAX_AGENTS && self.live & (1u64 << agent) != 0
+    }
+}

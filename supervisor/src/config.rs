@@ -1,0 +1,146 @@
+//! A run's configuration, resolved from the command line and checked before anything starts.
+
+use crate::cli::{RunArgs, Transport};
+use anyhow::{bail, Context, Result};
+use flockstep_agents::agent::AgentSpec;
+use flockstep_agents::bt::parse::parse_tree;
+use flockstep_agents::bt::render::to_text;
+use flockstep_agents::bt::spec::TreeSpec;
+use flockstep_agents::comm::CommMode;
+use flockstep_agents::learning::LearnParams;
+use flockstep_agents::uav::UavCatalog;
+use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
+use flockstep_world::scenario::Scenario;
+use flockstep_world::sim::EpisodeConfig;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Everything a run needs, validated.
+#[derive(Debug, Clone)]
+pub struct RunConfig {
+    /// As given: `s1`, `s2`, `s3` or a path (child processes get the same string).
+    pub scenario_arg: String,
+    pub scenario: Arc<Scenario>,
+    /// The tree file as given (None: the built-in Fig. 5 tree).
+    pub bt_path: Option<PathBuf>,
+    pub tree: TreeSpec,
+    pub comm: CommMode,
+    pub params: LearnParams,
+    pub episodes: EpisodeConfig,
+    pub uavs: usize,
+    pub trials: usize,
+    pub seed: u64,
+    pub smoothing: usize,
+    pub out: PathBuf,
+    pub transport: Transport,
+    pub run_id: String,
+    pub quiet: bool,
+}
+
+impl RunConfig {
+    pub fn resolve(args: &RunArgs) -> Result<RunConfig> {
+        if args.uavs == 0 {
+            bail!("--uavs must be at least 1");
+        }
+        if args.uavs > MAX_AGENTS {
+            bail!("--uavs {} exceeds the supported maximum of {MAX_AGENTS}", args.uavs);
+        }
+        if args.trials == 0 || args.trials > MAX_TRIALS {
+            bail!("--trials {} is out of range 1..={MAX_TRIALS}", args.trials);
+        }
+        if args.episodes == 0 {
+            bail!("--episodes must be at least 1");
+        }
+        if args.tick_cap == 0 {
+            bail!("--tick-cap must be at least 1");
+        }
+        let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs).to_string());
+        let scenario = Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+        if args.uavs > scenario.n_routes() {
+            bail!(
+                "--uavs {} but scenario `{}` has only {} route(s); use a scenario with more routes",
+                args.uavs,
+                scenario_arg,
+                scenario.n_routes()
+            );
+        }
+        let comm = match &args.comm {
+            Some(c) => CommMode::parse(c).with_context(|| format!("--comm `{c}`: expected none or flags"))?,
+            None if args.uavs > 1 => CommMode::Flags,
+            None => CommMode::None,
+        };
+        let tree = load_tree(args.bt.as_ref())?;
+        let params = LearnParams { alpha: args.alpha, gamma: args.gamma, epsilon: args.epsilon, learn: true };
+        params.validate().map_err(anyhow::Error::msg)?;
+        let run_id = match &args.run_id {
+            Some(id) => id.clone(),
+            None => default_run_id(),
+        };
+        flockstep_proto::services::validate_run_id(&run_id).map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
+        let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(&run_id));
+        Ok(RunConfig {
+            scenario_arg,
+            scenario: Arc::new(scenario),
+            bt_path: args.bt.clone(),
+            tree,
+            comm,
+            params,
+            episodes: EpisodeConfig {
+                train_episodes: args.episodes,
+                eval_episodes: args.eval_episodes,
+                tick_cap: args.tick_cap,
+            },
+            uavs: args.uavs,
+            trials: args.trials,
+            seed: args.seed,
+            smoothing: args.smoothing.unwrap_or((args.episodes / 100).max(1) as usize),
+            out,
+            transport: args.transport,
+            run_id,
+            quiet: args.quiet,
+        })
+    }
+
+    /// The spec of agent `slot`, as the in-process runner and the agent process build it.
+    pub fn agent_spec(&self, slot: usize) -> AgentSpec {
+        AgentSpec {
+            slot,
+            scenario: self.scenario.clone(),
+            tree: self.tree.clone(),
+            comm: self.comm,
+            params: self.params,
+            seed: self.seed,
+            trials: self.trials,
+        }
+    }
+
+    /// The tree in canonical text form (stored with snapshots and results).
+    pub fn tree_text(&self) -> String {
+        to_text(&self.tree)
+    }
+}
+
+/// The thesis's scenarios: one UAV searches two candidate cells (s2), two UAVs share them (s3).
+pub fn default_scenario(uavs: usize) -> &'static str {
+    if uavs == 1 {
+        "s2"
+    } else {
+        "s3"
+    }
+}
+
+/// Reads and parses a tree file, or the built-in Fig. 5 tree.
+pub fn load_tree(path: Option<&PathBuf>) -> Result<TreeSpec> {
+    match path {
+        None => Ok(parse_tree("fig5.bt", flockstep_agents::FIG5_TREE, &UavCatalog).expect("the built-in tree parses")),
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read tree file {}", path.display()))?;
+            Ok(parse_tree(&path.display().to_string(), &text, &UavCatalog)?)
+        }
+    }
+}
+
+fn default_run_id() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    format!("run-{}-{}", std::process::id(), secs)
+}

@@ -1,0 +1,94 @@
+//! Learning curves: episode length against iterations (episodes), mean over trials,
+//! smoothed by a trailing moving average, as the thesis plots them (Fig. 10, Fig. 11).
+
+use anyhow::{Context, Result};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One agent's curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Curve {
+    /// 1-based agent number.
+    pub agent: usize,
+    /// Mean over trials of the length of episode i (only episodes every trial reached).
+    pub mean: Vec<f64>,
+    /// Trailing moving average of `mean` over `window` episodes.
+    pub smoothed: Vec<f64>,
+}
+
+/// Curves of every agent from `lengths[agent][trial][episode]`.
+pub fn curves(lengths: &[Vec<Vec<u32>>], window: usize) -> Vec<Curve> {
+    lengths
+        .iter()
+        .enumerate()
+        .map(|(slot, trials)| {
+            let episodes = trials.iter().map(Vec::len).min().unwrap_or(0);
+            let mean: Vec<f64> = (0..episodes)
+                .map(|e| trials.iter().map(|t| f64::from(t[e])).sum::<f64>() / trials.len() as f64)
+                .collect();
+            Curve { agent: slot + 1, smoothed: moving_average(&mean, window.max(1)), mean }
+        })
+        .collect()
+}
+
+/// Trailing moving average: entry i is the mean of entries max(0, i+1-window)..=i.
+pub fn moving_average(values: &[f64], window: usize) -> Vec<f64> {
+    let mut sum = 0.0;
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            sum += v;
+            if i >= window {
+                sum -= values[i - window];
+            }
+            sum / (i + 1).min(window) as f64
+        })
+        .collect()
+}
+
+/// Writes `curve.csv`: `episode,agent,mean_length,smoothed_length`.
+pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
+    let mut text = String::from("episode,agent,mean_length,smoothed_length\n");
+    for curve in curves {
+        for (e, (mean, smooth)) in curve.mean.iter().zip(&curve.smoothed).enumerate() {
+            writeln!(text, "{e},{},{mean:.4},{smooth:.4}", curve.agent).expect("writing to a String");
+        }
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Reads agent `agent`'s smoothed curve back from a `curve.csv`.
+pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut values = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let parse = || -> Option<(usize, f64)> { Some((fields.get(1)?.parse().ok()?, fields.get(3)?.parse().ok()?)) };
+        let (row_agent, smoothed) = parse().with_context(|| format!("{}:{}: expected episode,agent,mean_length,smoothed_length", path.display(), i + 1))?;
+        if row_agent == agent {
+            values.push(smoothed);
+        }
+    }
+    anyhow::ensure!(!values.is_empty(), "{}: no rows for agent {agent}", path.display());
+    Ok(values)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn moving_average_is_trailing_and_starts_with_partial_windows() {
+        assert_eq!(moving_average(&[2.0, 4.0, 6.0, 8.0], 2), vec![2.0, 3.0, 5.0, 7.0]);
+        assert_eq!(moving_average(&[1.0, 2.0, 3.0], 1), vec![1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn curves_average_over_trials_up_to_the_shortest_trial() {
+        let lengths = vec![vec![vec![10, 20, 30], vec![30, 40]]];
+        let c = curves(&lengths, 1);
+        assert_eq!(c[0].agent, 1);
+        assert_eq!(c[0].mean, vec![20.0, 30.0]);
+    }
+}

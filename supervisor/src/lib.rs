@@ -1,0 +1,59 @@
+//! The supervisor: runs experiments, in one process or as one world and N agent processes,
+//! and turns what the world reports into a results directory.
+
+pub mod cli;
+pub mod config;
+pub mod curve;
+pub mod inproc;
+pub mod plot;
+pub mod recorder;
+pub mod results;
+pub mod run;
+pub mod shm;
+pub mod summary;
+
+use anyhow::Result;
+use clap::Parser;
+use cli::{Cli, Command};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Exit status of a run stopped by Ctrl-C / SIGTERM (results written, flagged partial).
+pub const EXIT_INTERRUPTED: i32 = 130;
+
+/// The `supervisor` binary.
+pub fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG").unwrap_or_else(|_| "warn".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(code) => std::process::ExitCode::from(code),
+        Err(e) => {
+            eprintln!("supervisor: error: {e:#}");
+            std::process::ExitCode::from(1)
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<u8> {
+    match cli.command {
+        Some(Command::Optimum { scenario }) => commands::optimum(&scenario).map(|()| 0),
+        Some(Command::Plot { curves, out, title }) => commands::plot(&curves, &out, &title).map(|()| 0),
+        None => {
+            let config = config::RunConfig::resolve(&cli.run)?;
+            let stop = Arc::new(AtomicBool::new(false));
+            let flag = stop.clone();
+            ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))?;
+            let outcome = run::run_experiment(&config, &stop)?;
+            for note in &outcome.notes {
+                eprintln!("supervisor: {note}");
+            }
+            println!("{}", config.out.join("summary.json").display());
+            Ok(if outcome.complete { 0 } else { EXIT_INTERRUPTED as u8 })
+        }
+    }
+}
+
+mod commands;

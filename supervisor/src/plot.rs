@@ -1,0 +1,81 @@
+//! Learning-curve plots (SVG, plotters): one line per curve, optional horizontal reference
+//! lines (greedy lengths, optima).
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+use std::path::Path;
+
+/// A named line of the plot.
+pub struct Series<'a> {
+    pub label: String,
+    pub values: &'a [f64],
+}
+
+/// A horizontal reference line, e.g. "optimum 11.5".
+pub struct Reference {
+    pub label: String,
+    pub value: f64,
+}
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+];
+
+/// Draws `series` (x = iteration, y = episode length) and `references` into an SVG file.
+pub fn plot_curves(path: &Path, title: &str, series: &[Series], references: &[Reference]) -> Result<()> {
+    let err = |e: &dyn std::fmt::Display| anyhow!("cannot draw {}: {e}", path.display());
+    let episodes = series.iter().map(|s| s.values.len()).max().unwrap_or(0).max(1);
+    let all = series.iter().flat_map(|s| s.values.iter().copied()).chain(references.iter().map(|r| r.value));
+    let top = all.fold(1.0f64, f64::max) * 1.05;
+    let root = SVGBackend::new(path, (960, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(16)
+        .x_label_area_size(44)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0f64..episodes as f64, 0f64..top)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc("iterations (episodes)")
+        .y_desc("episode length (ticks)")
+        .draw()
+        .map_err(|e| err(&e))?;
+    for (i, s) in series.iter().enumerate() {
+        let color = COLORS[i % COLORS.len()];
+        // At most ~2000 points per line keeps the SVG small; the curve is already smoothed.
+        let step = (s.values.len() / 2000).max(1);
+        let points = s.values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y));
+        chart
+            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(|e| err(&e))?
+            .label(s.label.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+    }
+    for (i, r) in references.iter().enumerate() {
+        let color = COLORS[(series.len() + i) % COLORS.len()];
+        let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
+        chart
+            .draw_series(DashedLineSeries::new([(0.0, r.value), (episodes as f64, r.value)], 6, 4, style))
+            .map_err(|e| err(&e))?
+            .label(format!("{} ({:.2})", r.label, r.value))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}

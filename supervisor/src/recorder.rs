@@ -1,0 +1,94 @@
+//! What the supervisor does with each episode report while a run goes on: record it and
+//! show progress (episodes, mean episode length, ticks/s, live agents).
+
+use crate::results::Collector;
+use anyhow::Result;
+use flockstep_proto::{EpisodeReport, Phase};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::time::{Duration, Instant};
+
+/// Training episodes of UAV1 in the progress bar's "mean length" window.
+const RECENT: usize = 200;
+
+pub struct Recorder {
+    collector: Collector,
+    bar: ProgressBar,
+    started: Instant,
+    last_draw: Instant,
+    rounds: u64,
+    env_steps: u64,
+    live: usize,
+}
+
+impl Recorder {
+    /// `total` is the number of training episodes over every trial.
+    pub fn new(collector: Collector, total: u64, quiet: bool) -> Recorder {
+        let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr()) };
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}")
+                .expect("a valid template")
+                .progress_chars("=> "),
+        );
+        let now = Instant::now();
+        Recorder { collector, bar, started: now, last_draw: now, rounds: 0, env_steps: 0, live: 0 }
+    }
+
+    pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
+        self.collector.record(report)?;
+        let duration = (0..flockstep_proto::MAX_AGENTS)
+            .filter(|&slot| report.members & (1 << slot) != 0)
+            .map(|slot| u64::from(report.lengths[slot]))
+            .max()
+            .unwrap_or(0);
+        self.env_steps += duration * u64::from(report.members.count_ones());
+        if report.phase == Phase::Train as u8 {
+            self.bar.inc(1);
+        }
+        Ok(())
+    }
+
+    /// Called after each barrier round; redraws the message a few times a second.
+    pub fn round(&mut self, rounds: u64) {
+        self.rounds = rounds;
+        if self.last_draw.elapsed() < Duration::from_millis(200) {
+            return;
+        }
+        self.last_draw = Instant::now();
+        let recent = self.collector.train_lengths().first().map(|trials| {
+            let tail: Vec<u32> = trials.iter().flat_map(|t| t[t.len().saturating_sub(RECENT / trials.len().max(1))..].iter().copied()).collect();
+            tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
+        });
+        let ticks_per_s = self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
+        self.bar.set_message(format!(
+            "mean length {:.1}  {:.0} ticks/s  {} live agents",
+            recent.unwrap_or(0.0),
+            ticks_per_s,
+            self.live
+        ));
+    }
+
+    pub fn set_live(&mut self, live: usize) {
+        self.live = live;
+    }
+
+    pub fn finish(&mut self) -> Result<()> {
+        self.bar.finish_and_clear();
+        self.collector.flush()
+    }
+
+    pub fn collector(&self) -> &Collector {
+        &self.collector
+    }
+
+    pub fn rounds(&self) -> u64 {
+        self.rounds
+    }
+
+    pub fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    pub fn live(&self) -> usize {
+        self.live
+    }
+}

@@ -1,0 +1,168 @@
+//! Collects the world's episode reports into the results directory and the run's statistics.
+//!
+//! Training episodes stream into `episodes.csv` (trial, agent, episode, start_tick, length,
+//! truncated) as they arrive, greedy-evaluation episodes into `greedy_episodes.csv`; lengths
+//! are also kept in memory for the learning curve and the summary. Agents are numbered from
+//! 1 (UAV1), trials and episodes from 0.
+
+use anyhow::{Context, Result};
+use flockstep_proto::{EpisodeReport, Phase, MAX_AGENTS};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+const CSV_HEADER: &str = "trial,agent,episode,start_tick,length,truncated\n";
+
+/// Greedy-evaluation totals of one agent over every trial.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GreedyStats {
+    pub episodes: u64,
+    pub total_length: u64,
+    pub truncated: u64,
+    /// Mean length per trial.
+    pub per_trial: Vec<f64>,
+}
+
+/// Everything the run recorded.
+#[derive(Debug)]
+pub struct Collector {
+    episodes_csv: BufWriter<File>,
+    greedy_csv: BufWriter<File>,
+    /// Training lengths: `train[agent][trial][episode]`.
+    train: Vec<Vec<Vec<u32>>>,
+    train_truncated: Vec<u64>,
+    /// Greedy sums: `(episodes, total length, truncated)` per agent and trial.
+    greedy: Vec<Vec<(u64, u64, u64)>>,
+    /// Ticks of every trial, counting training and evaluation.
+    ticks: Vec<u64>,
+}
+
+impl Collector {
+    pub fn create(dir: &Path, agents: usize, trials: usize) -> Result<Collector> {
+        let open = |name: &str| -> Result<BufWriter<File>> {
+            let path = dir.join(name);
+            let mut file = BufWriter::new(File::create(&path).with_context(|| format!("cannot write {}", path.display()))?);
+            file.write_all(CSV_HEADER.as_bytes())?;
+            Ok(file)
+        };
+        Ok(Collector {
+            episodes_csv: open("episodes.csv")?,
+            greedy_csv: open("greedy_episodes.csv")?,
+            train: vec![vec![Vec::new(); trials]; agents],
+            train_truncated: vec![0; agents],
+            greedy: vec![vec![(0, 0, 0); trials]; agents],
+            ticks: vec![0; trials],
+        })
+    }
+
+    /// Records one finished episode of one trial.
+    pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
+        let trial = report.trial as usize;
+        if trial >= self.ticks.len() {
+            anyhow::bail!("episode report for trial {trial}, but the run has {} trials", self.ticks.len());
+        }
+        let phase = Phase::from_u8(report.phase).with_context(|| format!("episode report with phase {}", report.phase))?;
+        let end = (0..MAX_AGENTS)
+            .filter(|&slot| report.members & (1 << slot) != 0)
+            .map(|slot| report.start_tick + u64::from(report.lengths[slot]))
+            .max()
+            .unwrap_or(report.start_tick);
+        self.ticks[trial] = self.ticks[trial].max(end);
+        for slot in (0..MAX_AGENTS).filter(|&slot| report.members & (1 << slot) != 0) {
+            if slot >= self.train.len() {
+                self.grow(slot + 1);
+            }
+            let length = report.lengths[slot];
+            let truncated = report.truncated >> slot & 1;
+            let line = format!("{},{},{},{},{},{}\n", trial, slot + 1, report.episode, report.start_tick, length, truncated);
+            match phase {
+                Phase::Train => {
+                    self.episodes_csv.write_all(line.as_bytes())?;
+                    self.train[slot][trial].push(length);
+                    self.train_truncated[slot] += truncated;
+                }
+                Phase::Eval => {
+                    self.greedy_csv.write_all(line.as_bytes())?;
+                    let entry = &mut self.greedy[slot][trial];
+                    entry.0 += 1;
+                    entry.1 += u64::from(length);
+                    entry.2 += truncated;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes room for agents that joined the run after it started.
+    fn grow(&mut self, agents: usize) {
+        let trials = self.ticks.len();
+        self.train.resize(agents, vec![Vec::new(); trials]);
+        self.train_truncated.resize(agents, 0);
+        self.greedy.resize(agents, vec![(0, 0, 0); trials]);
+    }
+
+    pub fn flush(&mut self) -> Result<()> {
+        self.episodes_csv.flush()?;
+        self.greedy_csv.flush()?;
+        Ok(())
+    }
+
+    /// `train[agent][trial]` lengths, in episode order.
+    pub fn train_lengths(&self) -> &[Vec<Vec<u32>>] {
+        &self.train
+    }
+
+    pub fn train_truncated(&self, agent: usize) -> u64 {
+        self.train_truncated.get(agent).copied().unwrap_or(0)
+    }
+
+    /// Training episodes recorded so far, over every trial (agent 1's count).
+    pub fn train_episodes(&self) -> u64 {
+        self.train.first().map(|t| t.iter().map(|e| e.len() as u64).sum()).unwrap_or(0)
+    }
+
+    /// Mean over trials of each trial's mean of its last `window` training episodes.
+    pub fn final_mean(&self, agent: usize, window: usize) -> Option<f64> {
+        let trials = self.train.get(agent)?;
+        let means: Vec<f64> = trials
+            .iter()
+            .filter(|t| !t.is_empty())
+            .map(|t| {
+                let tail = &t[t.len().saturating_sub(window)..];
+                tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len() as f64
+            })
+            .collect();
+        (!means.is_empty()).then(|| means.iter().sum::<f64>() / means.len() as f64)
+    }
+
+    /// Greedy totals of `agent` (None if it was never evaluated).
+    pub fn greedy(&self, agent: usize) -> Option<GreedyStats> {
+        let trials = self.greedy.get(agent)?;
+        let mut stats = GreedyStats::default();
+        for &(episodes, total, truncated) in trials {
+            stats.episodes += episodes;
+            stats.total_length += total;
+            stats.truncated += truncated;
+            if episodes > 0 {
+                stats.per_trial.push(total as f64 / episodes as f64);
+            }
+        }
+        (stats.episodes > 0).then_some(stats)
+    }
+
+    /// Ticks run in all trials together.
+    pub fn ticks(&self) -> u64 {
+        self.ticks.iter().sum()
+    }
+
+    pub fn agents(&self) -> usize {
+        self.train.len()
+    }
+}
+
+impl GreedyStats {
+    /// Mean over trials of each trial's mean greedy length.
+    pub fn mean(&self) -> f64 {
+        self.per_trial.iter().sum::<f64>() / self.per_trial.len().max(1) as f64
+    }
+}

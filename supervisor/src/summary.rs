@@ -1,0 +1,62 @@
+//! `summary.json`: the run's configuration, timings and headline results, for people and
+//! for scripts (tests and the results report read it).
+
+use crate::config::RunConfig;
+use crate::recorder::Recorder;
+use anyhow::{Context, Result};
+use serde_json::{json, Value};
+use std::path::Path;
+
+/// Window of `final_mean_episode_length`: UAV1's last 1000 training episodes per trial.
+pub const FINAL_WINDOW: usize = 1000;
+
+pub fn summary(config: &RunConfig, recorder: &Recorder, wall_seconds: f64, complete: bool, notes: &[String]) -> Value {
+    let collector = recorder.collector();
+    let agents = collector.agents();
+    let greedy: Vec<_> = (0..agents).map(|a| collector.greedy(a)).collect();
+    let ticks = collector.ticks();
+    let per_second = |n: u64| if wall_seconds > 0.0 { n as f64 / wall_seconds } else { 0.0 };
+    json!({
+        "flockstep_version": env!("CARGO_PKG_VERSION"),
+        "iceoryx2_version": "0.10",
+        "run_id": config.run_id,
+        "transport": format!("{:?}", config.transport).to_lowercase(),
+        "complete": complete,
+        "notes": notes,
+        "scenario": config.scenario_arg,
+        "scenario_name": config.scenario.name(),
+        "seed": config.seed,
+        "uavs": config.uavs,
+        "trials": config.trials,
+        "episodes": config.episodes.train_episodes,
+        "eval_episodes": config.episodes.eval_episodes,
+        "tick_cap": config.episodes.tick_cap,
+        "comm": config.comm.name(),
+        "alpha": config.params.alpha,
+        "gamma": config.params.gamma,
+        "epsilon": config.params.epsilon,
+        "tree": config.tree_text(),
+        "tree_file": config.bt_path.as_ref().map(|p| p.display().to_string()),
+        "smoothing_window": config.smoothing,
+        "ticks": ticks,
+        "rounds": recorder.rounds(),
+        "env_steps": recorder.env_steps(),
+        "wall_seconds": wall_seconds,
+        "ticks_per_second": per_second(ticks),
+        "rounds_per_second": per_second(recorder.rounds()),
+        "env_steps_per_second": per_second(recorder.env_steps()),
+        "final_window": FINAL_WINDOW,
+        "final_mean_episode_length": (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect::<Vec<_>>().first().cloned().flatten(),
+        "final_mean_episode_length_per_agent": (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect::<Vec<_>>(),
+        "train_truncated": (0..agents).map(|a| collector.train_truncated(a)).collect::<Vec<_>>(),
+        "greedy_episode_length": greedy.iter().map(|g| g.as_ref().map(|g| g.mean())).collect::<Vec<_>>(),
+        "greedy_episode_length_per_trial": greedy.iter().map(|g| g.as_ref().map(|g| g.per_trial.clone())).collect::<Vec<_>>(),
+        "greedy_episodes": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.episodes)).collect::<Vec<_>>(),
+        "greedy_truncated": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.truncated)).collect::<Vec<_>>(),
+    })
+}
+
+pub fn write(path: &Path, value: &Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).expect("JSON values serialise");
+    std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
+}

@@ -1,0 +1,165 @@
+//! A scenario map as written in a `.map` file (`maps/FORMAT.md`): the grid, the candidate
+//! target cells, the UAV routes, the start pose and the facts the map claims.
+//!
+//! This is only the file's content, checked for consistency; what a pose sees is computed
+//! by [`crate::visibility`] and the facts are verified by [`crate::scenario`]. Keeping the
+//! text form separate lets a generator build a `MapFile`, write it with [`MapFile::to_text`]
+//! and load it back like any hand-written map.
+
+mod parse;
+
+use std::fmt;
+
+use flockstep_proto::Pose;
+
+pub use parse::parse_map;
+
+/// One grid cell. A candidate target cell is `Free` (targets are listed in
+/// [`MapFile::targets`]), since a target must be visible and an `X` never is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cell {
+    Free,
+    /// An opaque building: never visible, blocks low lines of sight.
+    Occlusion,
+}
+
+/// A fact of the map: among all poses of UAV `uav`, exactly `poses` see target `target`.
+#[derive(Debug, Clone)]
+pub struct Expect {
+    /// 0-based route index (`UAV1` is 0).
+    pub uav: usize,
+    /// 0-based target index (`T1` is 0).
+    pub target: usize,
+    /// Sorted by (waypoint, height, heading); empty for `none`.
+    pub poses: Vec<Pose>,
+    /// 1-based line of the `expect` line, to point at a fact that fails.
+    pub line: usize,
+}
+
+/// The content of a `.map` file.
+///
+/// Equality compares the world and its facts, not where they were written: line and
+/// column numbers are ignored, so `parse_map(to_text(m)) == m`.
+#[derive(Debug, Clone)]
+pub struct MapFile {
+    /// Free text from the `name:` line.
+    pub name: String,
+    pub rows: usize,
+    pub cols: usize,
+    /// Row-major, `rows * cols` cells; row 0 is the north edge.
+    pub cells: Vec<Cell>,
+    /// `targets[k]` is the (row, col) of the label `T<k+1>`.
+    pub targets: Vec<(usize, usize)>,
+    /// `target_at[k]` is the (line, column) where `T<k+1>` is written.
+    pub target_at: Vec<(usize, usize)>,
+    /// `routes[u]` is UAV`u+1`'s waypoint cells in visiting order (cyclic).
+    pub routes: Vec<Vec<(usize, usize)>>,
+    /// Every UAV's pose at the start of an episode (0-based waypoint).
+    pub start: Pose,
+    pub expects: Vec<Expect>,
+}
+
+impl PartialEq for Expect {
+    fn eq(&self, other: &Self) -> bool {
+        self.uav == other.uav && self.target == other.target && self.poses == other.poses
+    }
+}
+
+impl PartialEq for MapFile {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+            && self.rows == other.rows
+            && self.cols == other.cols
+            && self.cells == other.cells
+            && self.targets == other.targets
+            && self.routes == other.routes
+            && self.start == other.start
+            && self.expects == other.expects
+    }
+}
+
+/// `UAV1` for route index 0.
+pub fn uav_name(uav: usize) -> String {
+    format!("UAV{}", uav + 1)
+}
+
+/// `T1` for target index 0.
+pub fn target_label(target: usize) -> String {
+    format!("T{}", target + 1)
+}
+
+/// The order in which a fact's poses are kept and written.
+pub(crate) fn pose_key(pose: &Pose) -> (u16, u8, u8) {
+    (pose.waypoint, pose.height, pose.heading)
+}
+
+impl MapFile {
+    /// The cell at (row, col), or `None` off the grid.
+    pub fn cell(&self, row: usize, col: usize) -> Option<Cell> {
+        if row < self.rows && col < self.cols {
+            self.cells.get(row * self.cols + col).copied()
+        } else {
+            None
+        }
+    }
+
+    /// Whether (row, col) is an `X`; cells off the grid are not.
+    pub fn is_occluded(&self, row: usize, col: usize) -> bool {
+        self.cell(row, col) == Some(Cell::Occlusion)
+    }
+
+    /// The map in the `.map` format; parsing it gives back an equal `MapFile`.
+    /// The name must be one line without `#`, as any name read by [`parse_map`] is.
+    pub fn to_text(&self) -> String {
+        self.to_string()
+    }
+
+    /// The grid token of (row, col): `.`, `X` or `T<k>`.
+    fn token(&self, row: usize, col: usize) -> String {
+        if let Some(k) = self.targets.iter().position(|&t| t == (row, col)) {
+            target_label(k)
+        } else if self.is_occluded(row, col) {
+            "X".to_string()
+        } else {
+            ".".to_string()
+        }
+    }
+}
+
+impl fmt::Display for MapFile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "name: {}", self.name)?;
+        writeln!(f, "size: {} {}", self.rows, self.cols)?;
+        let start = self.start;
+        writeln!(f, "start: {start}")?;
+        writeln!(f, "grid:")?;
+        // Pad the tokens to one width so the columns line up, as in the hand-written maps.
+        let width = (0..self.targets.len()).map(|k| target_label(k).len()).max().unwrap_or(1);
+        for row in 0..self.rows {
+            let tokens: Vec<String> =
+                (0..self.cols).map(|col| format!("{:<width$}", self.token(row, col))).collect();
+            writeln!(f, "{}", tokens.join(" ").trim_end())?;
+        }
+        for (uav, route) in self.routes.iter().enumerate() {
+            write!(f, "route {}:", uav_name(uav))?;
+            for (row, col) in route {
+                write!(f, " {row},{col}")?;
+            }
+            writeln!(f)?;
+        }
+        for fact in &self.expects {
+            write!(f, "expect {} {}: ", uav_name(fact.uav), target_label(fact.target))?;
+            if fact.poses.is_empty() {
+                write!(f, "none")?;
+            }
+            for (i, pose) in fact.poses.iter().enumerate() {
+                let sep = if i == 0 { "" } else { ", " };
+                let (wp, height, heading) =
+                    (pose.waypoint + 1, pose.height().name(), pose.heading().name());
+                write!(f, "{sep}{wp} {height} {heading}")?;
+            }
+            writeln!(f)?;
+        }
+        Ok(())
+    }
+}
