@@ -309,7 +309,7 @@ fn condition_prefix_does_not_reach_actions() {
 
 #[test]
 fn leaf_without_a_name_is_refused() {
-    assert_refused("AND 1\n- A- 0\n", "2:3", &["expected action name after `A-`"]);
+    assert_refused("AND 1\n- A- 0\n", "2:3", &["expected a leaf name after `A-`"]);
 }
 
 #[test]

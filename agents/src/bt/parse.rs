@@ -245,7 +245,7 @@ fn leaf(token: Token, catalog: &dyn LeafCatalog) -> Result<NodeKind, Problem> {
             Problem::at(token.col, message)
         })?;
     if name.is_empty() {
-        let message = format!("expected {} name after `{}`", kind.noun(), kind.prefix());
+        let message = format!("expected a leaf name after `{}`", kind.prefix());
         return Err(Problem::at(token.col, message));
     }
     let leaf = catalog.resolve(kind, name).ok_or_else(|| {

@@ -31,7 +31,7 @@ use super::spec::{NodeKind, NodeSpec, TreeSpec};
 /// The tree in the canonical text format.
 ///
 /// A tree built in code rather than parsed reads back only if it is one the parser accepts
-/// (leaf names in the catalog, child counts that fit the kinds).
+/// (leaf names in the catalog, child counts that fit the kinds, parameters in range).
 pub fn to_text(tree: &TreeSpec) -> String {
     let mut out = String::new();
     write_text(&tree.root, 0, &mut out);
@@ -66,8 +66,8 @@ fn write_ascii(node: &NodeSpec, width: usize, branch: &str, indent: &str, out: &
     for (index, child) in node.children.iter().enumerate() {
         let (own, below) =
             if index == last { ("└── ", "    ") } else { ("├── ", "│   ") };
-        let branch = format!("{indent}{own}");
-        write_ascii(child, width, &branch, &format!("{indent}{below}"), out);
+        let (child_branch, child_indent) = (format!("{indent}{own}"), format!("{indent}{below}"));
+        write_ascii(child, width, &child_branch, &child_indent, out);
     }
 }
 

@@ -92,6 +92,8 @@ struct Lor {
     running_child: Option<u32>,
     /// The step waiting for its next state: (s, child).
     pending: Option<(StateId, u32)>,
+    /// Which children have been tried in this tick (each selector its own: selectors nest).
+    tried: Vec<bool>,
 }
 
 /// A behavior tree ready to tick, with its learning selectors' Q-tables and RNG.
@@ -106,8 +108,6 @@ pub struct Tree {
     lors: Vec<Lor>,
     params: LearnParams,
     rng: Xoshiro256PlusPlus,
-    /// Scratch: which children a learning selector has tried in this tick.
-    tried: Vec<bool>,
 }
 
 impl Tree {
@@ -134,12 +134,9 @@ impl Tree {
             lors: Vec::new(),
             params,
             rng,
-            tried: Vec::new(),
         };
         tree.flatten(&spec.root);
         tree.finished = vec![0; tree.children.len()];
-        let widest = tree.lors.iter().map(|l| l.table.n_actions()).max().unwrap_or(0);
-        tree.tried = vec![false; widest];
         Ok(tree)
     }
 
@@ -156,6 +153,7 @@ impl Tree {
                     table: QTable::new(spec.children.len()),
                     running_child: None,
                     pending: None,
+                    tried: vec![false; spec.children.len()],
                 });
                 Op::Learning { lor: self.lors.len() as u32 - 1 }
             }
@@ -261,6 +259,10 @@ impl Tree {
     pub fn label(&self, node: NodeId) -> (usize, &str) {
         let (line, label) = &self.labels[node as usize];
         (*line, label)
+    }
+
+    pub fn is_leaf(&self, node: NodeId) -> bool {
+        matches!(self.nodes[node as usize].op, Op::Action { .. } | Op::Condition { .. })
     }
 
     pub fn node_count(&self) -> usize {
@@ -393,7 +395,13 @@ impl Tree {
     /// `REPEAT n` (`go_on` = SUCCESS: the child must succeed n times) and `RETRY n`
     /// (`go_on` = FAILURE: up to n attempts). Loops within the tick while the child
     /// finishes with `go_on`; the count survives a RUNNING child.
-    fn tick_loop(&mut self, id: NodeId, limit: u32, go_on: Status, ctx: &mut impl TickContext) -> Status {
+    fn tick_loop(
+        &mut self,
+        id: NodeId,
+        limit: u32,
+        go_on: Status,
+        ctx: &mut impl TickContext,
+    ) -> Status {
         let child = self.child(id, 0);
         loop {
             let status = self.tick_node(child, ctx);
@@ -433,14 +441,14 @@ impl Tree {
         }
         let count = self.nodes[id as usize].count;
         let explore = params.epsilon > 0.0 && self.rng.random::<f64>() < params.epsilon;
-        self.tried[..count as usize].fill(false);
+        self.lors[lor].tried.fill(false);
         for remaining in (1..=count).rev() {
             let pick = if explore {
-                self.random_untried(count, remaining)
+                self.random_untried(lor, remaining)
             } else {
                 self.best_untried(lor, state, count)
             };
-            self.tried[pick as usize] = true;
+            self.lors[lor].tried[pick as usize] = true;
             ctx.trace(TraceEvent::Chose { node: id, child: pick });
             let status = self.tick_node(self.child(id, pick), ctx);
             if status == Status::Failure {
@@ -463,12 +471,12 @@ impl Tree {
     /// The untried child with the highest Q(s, .); ties are broken uniformly by the RNG.
     #[inline]
     fn best_untried(&mut self, lor: usize, state: StateId, count: u32) -> u32 {
-        let table = &self.lors[lor].table;
+        let Lor { table, tried, .. } = &self.lors[lor];
         let mut best = u32::MAX;
         let mut best_q = f64::NEG_INFINITY;
         let mut ties = 0u32;
         for a in 0..count {
-            if self.tried[a as usize] {
+            if tried[a as usize] {
                 continue;
             }
             let q = table.get(state, a as usize);
@@ -486,21 +494,20 @@ impl Tree {
         best
     }
 
-    /// A uniformly chosen untried child, `remaining` of `count` being untried.
-    fn random_untried(&mut self, count: u32, remaining: u32) -> u32 {
-        let mut k = self.rng.random_range(0..remaining);
-        for a in 0..count {
-            if !self.tried[a as usize] {
-                if k == 0 {
-                    return a;
-                }
-                k -= 1;
-            }
-        }
-        unreachable!("remaining counts the untried children")
+    /// A uniformly chosen untried child, `remaining` children being untried.
+    fn random_untried(&mut self, lor: usize, remaining: u32) -> u32 {
+        let k = self.rng.random_range(0..remaining) as usize;
+        let untried = self.lors[lor].tried.iter().enumerate().filter(|(_, &tried)| !tried);
+        untried.map(|(a, _)| a as u32).nth(k).expect("`remaining` counts the untried children")
     }
 
-    fn halt_previous_running(&mut self, id: NodeId, lor: usize, now: u32, ctx: &mut impl TickContext) {
+    fn halt_previous_running(
+        &mut self,
+        id: NodeId,
+        lor: usize,
+        now: u32,
+        ctx: &mut impl TickContext,
+    ) {
         if let Some(previous) = self.lors[lor].running_child {
             if previous != now {
                 self.halt_node(self.child(id, previous), ctx);
@@ -563,19 +570,10 @@ fn worst_case_commands(spec: &NodeSpec) -> u64 {
     }
 }
 
-/// A node's label as the text format writes it, parameters included.
+/// A node's label as the text format writes it, parameters included (`PAR m=2`).
 fn label(kind: &NodeKind) -> String {
-    match kind {
-        NodeKind::Sequence { memory } => if *memory { "AND*" } else { "AND" }.to_string(),
-        NodeKind::Fallback { memory } => if *memory { "OR*" } else { "OR" }.to_string(),
-        NodeKind::Learning => "LOR".to_string(),
-        NodeKind::Parallel { success_threshold } => format!("PAR m={success_threshold}"),
-        NodeKind::Inverter => "NOT".to_string(),
-        NodeKind::ForceSuccess => "FORCE_SUCCESS".to_string(),
-        NodeKind::ForceFailure => "FORCE_FAILURE".to_string(),
-        NodeKind::Repeat { times } => format!("REPEAT n={times}"),
-        NodeKind::Retry { attempts } => format!("RETRY n={attempts}"),
-        NodeKind::Action { name, .. } => format!("A-{name}"),
-        NodeKind::Condition { name, .. } => format!("C-{name}"),
+    match kind.param() {
+        Some((key, value)) => format!("{kind} {key}={value}"),
+        None => kind.to_string(),
     }
 }

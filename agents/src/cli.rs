@@ -1,0 +1,81 @@
+//! The `agent` binary: one UAV process of a run (`agent run ...`, started by the
+//! supervisor), and the behavior-tree inspection tools (`agent bt show`, `agent bt replay`).
+
+use crate::bt::parse::parse_tree;
+use crate::bt::render::render_ascii;
+use crate::bt::replay::{replay, OpenCatalog};
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Debug, Parser)]
+#[command(name = "agent", version, about = "A flockstep UAV agent, and tools to inspect behavior trees")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Behavior-tree tools.
+    Bt {
+        #[command(subcommand)]
+        command: BtCommand,
+    },
+    /// Run as UAV agent of a simulation (started by the supervisor).
+    Run(crate::node::NodeArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum BtCommand {
+    /// Print a tree file as an ASCII drawing (any leaf names are accepted).
+    Show { tree: PathBuf },
+    /// Tick a tree against scripted leaf results; print per tick the root status and the
+    /// leaves ticked and halted.
+    Replay {
+        tree: PathBuf,
+        script: PathBuf,
+        /// Seed of the learning selectors' tie-breaking.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
+}
+
+/// The `agent` binary.
+pub fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG").unwrap_or_else(|_| "warn".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match Cli::parse().command {
+        Command::Bt { command: BtCommand::Show { tree } } => show(&tree),
+        Command::Bt { command: BtCommand::Replay { tree, script, seed } } => replay_files(&tree, &script, seed),
+        Command::Run(args) => crate::node::run(&args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("agent: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn read(path: &PathBuf) -> Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+fn show(path: &PathBuf) -> Result<()> {
+    let tree = parse_tree(&path.display().to_string(), &read(path)?, &OpenCatalog::default())?;
+    print!("{}", render_ascii(&tree));
+    Ok(())
+}
+
+fn replay_files(tree_path: &PathBuf, script_path: &PathBuf, seed: u64) -> Result<()> {
+    let catalog = OpenCatalog::default();
+    let tree = parse_tree(&tree_path.display().to_string(), &read(tree_path)?, &catalog)?;
+    let report = replay(&tree, &catalog, &script_path.display().to_string(), &read(script_path)?, seed)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    print!("{report}");
+    Ok(())
+}
