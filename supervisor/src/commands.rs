@@ -3,15 +3,26 @@
 use crate::curve::read_smoothed;
 use crate::plot::{plot_curves, Series};
 use anyhow::{Context, Result};
-fn todo_optimum(_: &Scenario, _: usize) {}
+use flockstep_world::optimum::{optimum as memoryless_optimum, optimum_with_known_target};
 use flockstep_world::scenario::Scenario;
 use std::path::Path;
 
-/// Prints the exact optimal expected episode length of each route flown alone.
+/// Prints the exact optimal expected episode length of each route flown alone, and the
+/// optimal path.
 pub fn optimum(spec: &str) -> Result<()> {
     let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
     for uav in 0..scenario.n_routes() {
-        todo_optimum(&scenario, uav);
+        let best = memoryless_optimum(&scenario, uav).map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
+        let known = optimum_with_known_target(&scenario, uav).map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
+        println!(
+            "{} UAV{}: memoryless optimum {:.4} ticks (per target {:?}); knowing the target {:.4}",
+            scenario.name(),
+            uav + 1,
+            best.expected_ticks,
+            best.lengths,
+            known.expected_ticks
+        );
+        println!("{best}");
     }
     Ok(())
 }

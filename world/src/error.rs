@@ -38,7 +38,9 @@ pub enum MapErrorKind {
     GridRows { expected: usize, found: usize },
     #[error("this grid row has {found} cells, expected {expected} (from `size:`)")]
     RaggedRow { expected: usize, found: usize },
-    #[error("unknown cell `{token}`: expected `.` (free), `X` (occlusion) or `T<k>` (target, k >= 1)")]
+    #[error(
+        "unknown cell `{token}`: expected `.` (free), `X` (occlusion) or `T<k>` (target, k >= 1)"
+    )]
     UnknownCell { token: String },
     #[error("duplicate target `{label}` (first at line {line}, column {col})")]
     DuplicateTarget { label: String, line: usize, col: usize },
@@ -50,7 +52,10 @@ pub enum MapErrorKind {
     NoRoutes,
     #[error("too many {what}: {found}, at most {max} allowed")]
     TooMany { what: &'static str, found: usize, max: usize },
-    #[error("expected route name `{expected}` (routes are named UAV1, UAV2, ... in order), found `{found}`")]
+    #[error(
+        "expected route name `{expected}` (routes are named UAV1, UAV2, ... in order), \
+         found `{found}`"
+    )]
     RouteName { expected: String, found: String },
     #[error("route {uav} has no waypoints: expected at least one `row,col`")]
     NoWaypoints { uav: String },
@@ -80,17 +85,27 @@ pub enum WorldError {
     #[error(transparent)]
     Map(#[from] MapError),
     /// An `expect` line does not hold; `actual` lists the poses that do see the target.
+    /// `uav` and `target` are 0-based indices.
     #[error(
-        "{file}:{line}: fact `expect {uav} {target}: {expected}` does not hold: \
-         {uav} sees {target} from {actual}"
+        "{file}:{line}: fact `expect UAV{u} T{t}: {expected}` does not hold: \
+         UAV{u} sees T{t} from {actual}",
+        u = .uav + 1,
+        t = .target + 1
     )]
-    Fact { file: String, line: usize, uav: String, target: String, expected: String, actual: String },
+    Fact { file: String, line: usize, uav: usize, target: usize, expected: String, actual: String },
     /// A candidate target no pose of any route sees: an episode drawing it could never end.
     #[error(
         "{file}:{line}:{col}: target {label} at {row},{col_in_grid} is visible from no pose of \
          any route: an episode with this target could never end"
     )]
-    Unseeable { file: String, line: usize, col: usize, label: String, row: usize, col_in_grid: usize },
+    Unseeable {
+        file: String,
+        line: usize,
+        col: usize,
+        label: String,
+        row: usize,
+        col_in_grid: usize,
+    },
 }
 
 /// Why the optimum of a route could not be computed.
@@ -98,9 +113,16 @@ pub enum WorldError {
 pub enum OptimumError {
     #[error("no UAV{} in this scenario (it has {n})", .uav + 1)]
     NoSuchUav { uav: usize, n: usize },
-    #[error("UAV{} sees {label} from no pose of its route: the expected episode length is infinite", .uav + 1)]
+    #[error(
+        "UAV{} sees {label} from no pose of its route: the expected episode length is infinite",
+        .uav + 1
+    )]
     Unseeable { uav: usize, label: String },
-    #[error("UAV{} has no trajectory without a repeated state that sees every target: no memoryless policy ends every episode", .uav + 1)]
+    #[error(
+        "UAV{} has no trajectory that sees every target without repeating a state: \
+         no memoryless policy ends every episode",
+        .uav + 1
+    )]
     NoSimplePath { uav: usize },
     #[error("the search for UAV{}'s optimum gave up after {expanded} nodes", .uav + 1)]
     TooLarge { uav: usize, expanded: usize },

@@ -88,6 +88,18 @@ pub fn target_label(target: usize) -> String {
     format!("T{}", target + 1)
 }
 
+/// A fact's poses as an `expect` line writes them: `6 high E, 3 high N`, or `none`.
+pub(crate) fn fact_poses(poses: &[Pose]) -> String {
+    if poses.is_empty() {
+        return "none".to_string();
+    }
+    let text: Vec<String> = poses
+        .iter()
+        .map(|p| format!("{} {} {}", p.waypoint + 1, p.height().name(), p.heading().name()))
+        .collect();
+    text.join(", ")
+}
+
 /// The order in which a fact's poses are kept and written.
 pub(crate) fn pose_key(pose: &Pose) -> (u16, u8, u8) {
     (pose.waypoint, pose.height, pose.heading)
@@ -97,7 +109,7 @@ impl MapFile {
     /// The cell at (row, col), or `None` off the grid.
     pub fn cell(&self, row: usize, col: usize) -> Option<Cell> {
         if row < self.rows && col < self.cols {
-            self.cells.get(row * self.cols + col).copied()
+            self.cells.get(row.checked_mul(self.cols)?.checked_add(col)?).copied()
         } else {
             None
         }
@@ -148,17 +160,8 @@ impl fmt::Display for MapFile {
             writeln!(f)?;
         }
         for fact in &self.expects {
-            write!(f, "expect {} {}: ", uav_name(fact.uav), target_label(fact.target))?;
-            if fact.poses.is_empty() {
-                write!(f, "none")?;
-            }
-            for (i, pose) in fact.poses.iter().enumerate() {
-                let sep = if i == 0 { "" } else { ", " };
-                let (wp, height, heading) =
-                    (pose.waypoint + 1, pose.height().name(), pose.heading().name());
-                write!(f, "{sep}{wp} {height} {heading}")?;
-            }
-            writeln!(f)?;
+            let (uav, target) = (uav_name(fact.uav), target_label(fact.target));
+            writeln!(f, "expect {uav} {target}: {}", fact_poses(&fact.poses))?;
         }
         Ok(())
     }

@@ -11,7 +11,7 @@ use std::path::Path;
 use flockstep_proto::{Heading, Height, Pose};
 
 use crate::error::WorldError;
-use crate::map::{parse_map, pose_key, target_label, uav_name, Expect, MapFile};
+use crate::map::{fact_poses, parse_map, pose_key, target_label, Expect, MapFile};
 use crate::visibility;
 
 /// The thesis's maps, embedded so that a run needs no files: (name, file name, text).
@@ -23,9 +23,14 @@ const BUILTIN: [(&str, &str, &str); 3] = [
 
 /// Index of `pose` within its UAV's slice of the table: 2 heights x 4 headings a waypoint.
 #[inline]
-fn state_index(pose: Pose) -> usize {
+pub(crate) fn state_index(pose: Pose) -> usize {
     // Masking keeps a malformed height or heading inside its waypoint's 8 entries.
     (pose.waypoint as usize * 2 + (pose.height & 1) as usize) * 4 + (pose.heading & 3) as usize
+}
+
+/// The pose at index `index` of a UAV's slice of the table; inverse of [`state_index`].
+pub(crate) fn state_pose(index: usize) -> Pose {
+    Pose::new(index / 8, Height::ALL[(index / 4) % 2], Heading::ALL[index % 4])
 }
 
 /// A map ready to simulate.
@@ -88,10 +93,11 @@ impl Scenario {
             offsets.push(table.len());
         }
         let scenario = Scenario { map, source_text, table, offsets };
-        scenario.check_every_target_seen(source)?;
+        // The map's own claims first: a failed fact says most precisely what is wrong.
         for fact in &scenario.map.expects {
             scenario.check_fact(source, fact)?;
         }
+        scenario.check_every_target_seen(source)?;
         Ok(scenario)
     }
 
@@ -113,27 +119,15 @@ impl Scenario {
         if actual == fact.poses {
             return Ok(());
         }
-        // The fact as written (`6 high E`) and the truth as the thesis states it (`wp6 high E`).
-        let expected: Vec<String> = fact
-            .poses
-            .iter()
-            .map(|p| format!("{} {} {}", p.waypoint + 1, p.height().name(), p.heading().name()))
-            .collect();
+        // The truth is written as the thesis states it: `wp6 high E, wp7 low N`.
         let actual: Vec<String> = actual.iter().map(Pose::to_string).collect();
-        let or_else = |list: Vec<String>, empty: &str| {
-            if list.is_empty() {
-                empty.to_string()
-            } else {
-                list.join(", ")
-            }
-        };
         Err(WorldError::Fact {
             file: source.to_string(),
             line: fact.line,
-            uav: uav_name(fact.uav),
-            target: target_label(fact.target),
-            expected: or_else(expected, "none"),
-            actual: or_else(actual, "no pose"),
+            uav: fact.uav,
+            target: fact.target,
+            expected: fact_poses(&fact.poses),
+            actual: if actual.is_empty() { "no pose".to_string() } else { actual.join(", ") },
         })
     }
 

@@ -34,7 +34,12 @@ fn signed(cell: (usize, usize)) -> (i64, i64) {
 }
 
 /// Whether `q` lies in the footprint of a camera at `p` (geometry only: no grid, no `X`).
-pub fn in_footprint(p: (usize, usize), height: Height, heading: Heading, q: (usize, usize)) -> bool {
+pub fn in_footprint(
+    p: (usize, usize),
+    height: Height,
+    heading: Heading,
+    q: (usize, usize),
+) -> bool {
     let ((p_r, p_c), (q_r, q_c)) = (signed(p), signed(q));
     let (dr, dc) = (q_r - p_r, q_c - p_c);
     let ((fr, fc), (rr, rc)) = axes(heading);
@@ -94,17 +99,27 @@ pub fn is_visible(
     heading: Heading,
     q: (usize, usize),
 ) -> bool {
-    if !in_footprint(p, height, heading, q) || map.cell(q.0, q.1).is_none() || map.is_occluded(q.0, q.1) {
+    if !in_footprint(p, height, heading, q)
+        || map.cell(q.0, q.1).is_none()
+        || map.is_occluded(q.0, q.1)
+    {
         return false;
     }
     match height {
         Height::High => true,
-        Height::Low => walk_between(signed(p), signed(q), |r, c| !map.is_occluded(r as usize, c as usize)),
+        Height::Low => {
+            walk_between(signed(p), signed(q), |r, c| !map.is_occluded(r as usize, c as usize))
+        }
     }
 }
 
 /// Every cell of `map` a camera at `p` (height, heading) sees, in row-major order.
-pub fn visible_cells(map: &MapFile, p: (usize, usize), height: Height, heading: Heading) -> Vec<(usize, usize)> {
+pub fn visible_cells(
+    map: &MapFile,
+    p: (usize, usize),
+    height: Height,
+    heading: Heading,
+) -> Vec<(usize, usize)> {
     let (p_r, p_c) = signed(p);
     let ((fr, fc), (rr, rc)) = axes(heading);
     let (near, far) = depth(height);

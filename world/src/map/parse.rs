@@ -93,12 +93,18 @@ fn col_of(line: &str, byte: usize) -> usize {
     line.get(..byte).map_or(1, |s| s.chars().count() + 1)
 }
 
-fn found(tok: Option<&Tok>) -> String {
-    tok.map_or_else(|| "end of line".to_string(), |t| format!("`{}`", t.text))
+/// `found` of a message: the token, or what ends the text where a token was expected.
+fn found(tok: Option<&Tok>, end: &str) -> String {
+    tok.map_or_else(|| end.to_string(), |t| format!("`{}`", t.text))
 }
 
 fn syntax(expected: impl Into<String>, tok: Option<&Tok>) -> MapErrorKind {
-    MapErrorKind::Syntax { expected: expected.into(), found: found(tok) }
+    syntax_before(expected, tok, "end of line")
+}
+
+/// A syntax error in a piece of a line that ends with `end` (e.g. a `,`).
+fn syntax_before(expected: impl Into<String>, tok: Option<&Tok>, end: &str) -> MapErrorKind {
+    MapErrorKind::Syntax { expected: expected.into(), found: found(tok, end) }
 }
 
 /// `prefix<k>` with k >= 1 written without sign or leading zeros, e.g. `T3`, `UAV2`, `wp6`.
@@ -199,7 +205,7 @@ impl Parser<'_> {
             }
             "start" => {
                 self.once("start:", raw.start.as_ref().map(|s| s.0), line)?;
-                let pose = self.pose(line, &toks, end_col)?;
+                let pose = self.pose(line, &toks, (end_col, "end of line"))?;
                 self.end(line, toks.get(3), "end of line after the start pose")?;
                 raw.start = Some((line, pose));
             }
@@ -247,28 +253,29 @@ impl Parser<'_> {
         }
     }
 
-    /// `<wp> <low|high> <N|E|S|W>`; the waypoint may be written `wp6` or `6`.
+    /// `<wp> <low|high> <N|E|S|W>`; the waypoint may be written `wp6` or `6`. `end` is
+    /// the column and the description of what follows the pose.
     fn pose<'a>(
         &self,
         line: usize,
         toks: &[Tok<'a>],
-        end_col: usize,
+        end: (usize, &str),
     ) -> Result<RawPose<'a>, MapError> {
-        let at = |i: usize| toks.get(i).map_or(end_col, |t| t.col);
+        let at = |i: usize| toks.get(i).map_or(end.0, |t| t.col);
+        let syntax = |expected: &str, i: usize| syntax_before(expected, toks.get(i), end.1);
         let wp_tok = toks.first();
         let wp = wp_tok.and_then(|t| {
             numbered(t.text, "wp").or_else(|| numbered(&format!("wp{}", t.text), "wp"))
         });
         let (Some(&tok), Some(wp)) = (wp_tok, wp) else {
-            let kind = syntax("a waypoint number >= 1 (`wp6` or `6`)", wp_tok);
+            let kind = syntax("a waypoint number >= 1 (`wp6` or `6`)", 0);
             return Err(self.err(line, at(0), kind));
         };
         let Some(height) = toks.get(1).and_then(|t| Height::parse(t.text)) else {
-            return Err(self.err(line, at(1), syntax("a height `low` or `high`", toks.get(1))));
+            return Err(self.err(line, at(1), syntax("a height `low` or `high`", 1)));
         };
         let Some(heading) = toks.get(2).and_then(|t| Heading::parse(t.text)) else {
-            let kind = syntax("a heading `N`, `E`, `S` or `W`", toks.get(2));
-            return Err(self.err(line, at(2), kind));
+            return Err(self.err(line, at(2), syntax("a heading `N`, `E`, `S` or `W`", 2)));
         };
         Ok(RawPose { at: tok, wp, height, heading })
     }
@@ -288,9 +295,10 @@ impl Parser<'_> {
         }
         let mut waypoints = Vec::with_capacity(toks.len());
         for tok in toks {
-            let cell = tok.text.split_once(',').and_then(|(r, c)| {
-                Some((r.parse::<usize>().ok()?, c.parse::<usize>().ok()?))
-            });
+            let cell = tok
+                .text
+                .split_once(',')
+                .and_then(|(r, c)| Some((r.parse::<usize>().ok()?, c.parse::<usize>().ok()?)));
             let Some((row, col)) = cell else {
                 let kind = syntax("a waypoint `row,col` (0-based integers)", Some(tok));
                 return Err(self.err(line, tok.col, kind));
@@ -314,10 +322,12 @@ impl Parser<'_> {
         if !(toks.len() == 1 && toks[0].text == "none") {
             // Each comma-separated part is one pose; its end column is where the comma is.
             let mut from = body;
-            for part in content[body..].split(',') {
+            let parts: Vec<&str> = content[body..].split(',').collect();
+            for (i, part) in parts.iter().enumerate() {
                 let to = from + part.len();
                 let toks = tokenize(part, col_of(content, from));
-                let pose = self.pose(line, &toks, col_of(content, to))?;
+                let end = if i + 1 < parts.len() { "`,`" } else { "end of line" };
+                let pose = self.pose(line, &toks, (col_of(content, to), end))?;
                 let expected = "`,` or end of line after the pose";
                 self.end(line, toks.get(3), expected)?;
                 poses.push(pose);
@@ -337,30 +347,38 @@ impl Parser<'_> {
         let (_, rows, cols) = raw.size.ok_or_else(|| missing("size:", "size"))?;
         let (start_line, start) = raw.start.ok_or_else(|| missing("start:", "start"))?;
         let (grid_line, grid) = raw.grid.ok_or_else(|| missing("grid:", "grid"))?;
-        let (cells, targets, target_at) = self.grid(grid_line, &grid, rows, cols)?;
         let mut map = MapFile {
             name,
             rows,
             cols,
-            cells,
-            targets,
-            target_at,
+            cells: Vec::new(),
+            targets: Vec::new(),
+            target_at: Vec::new(),
             routes: Vec::new(),
-            start: Pose::new(start.wp - 1, start.height, start.heading),
+            // Set below, once the start waypoint is known to be on every route.
+            start: Pose::default(),
             expects: Vec::new(),
         };
+        self.grid(&mut map, grid_line, &grid)?;
         self.routes(&mut map, &raw.routes)?;
         for (uav, route) in map.routes.iter().enumerate() {
             if start.wp > route.len() {
                 let (wp, len) = (start.wp, route.len());
-                let kind =
-                    MapErrorKind::BeyondRoute { what: "start waypoint", wp, uav: uav_name(uav), len };
+                let kind = MapErrorKind::BeyondRoute {
+                    what: "start waypoint",
+                    wp,
+                    uav: uav_name(uav),
+                    len,
+                };
                 return Err(self.err(start_line, start.at.col, kind));
             }
         }
+        map.start = Pose::new(start.wp - 1, start.height, start.heading);
         for fact in &raw.expects {
             let expect = self.fact(&map, fact)?;
-            if let Some(first) = map.expects.iter().find(|e| (e.uav, e.target) == (expect.uav, expect.target)) {
+            if let Some(first) =
+                map.expects.iter().find(|e| (e.uav, e.target) == (expect.uav, expect.target))
+            {
                 let kind = MapErrorKind::DuplicateExpect {
                     uav: uav_name(expect.uav),
                     target: target_label(expect.target),
@@ -374,25 +392,24 @@ impl Parser<'_> {
     }
 
     /// The grid rows: cells, targets by label, and where each label is written.
-    #[allow(clippy::type_complexity)]
-    fn grid(
-        &self,
-        grid_line: usize,
-        grid: &[RawRow],
-        rows: usize,
-        cols: usize,
-    ) -> Result<(Vec<Cell>, Vec<(usize, usize)>, Vec<(usize, usize)>), MapError> {
+    fn grid(&self, map: &mut MapFile, grid_line: usize, grid: &[RawRow]) -> Result<(), MapError> {
+        let (rows, cols) = (map.rows, map.cols);
         if grid.len() != rows {
             // Too many rows: point at the first extra one; too few: at `grid:`.
             let line = grid.get(rows).map_or(grid_line, |r| r.0);
-            return Err(self.err(line, 1, MapErrorKind::GridRows { expected: rows, found: grid.len() }));
+            return Err(self.err(
+                line,
+                1,
+                MapErrorKind::GridRows { expected: rows, found: grid.len() },
+            ));
         }
-        let mut cells = Vec::with_capacity(rows * cols);
         // Label number -> (row, col, line, column).
         let mut labels: BTreeMap<usize, (usize, usize, usize, usize)> = BTreeMap::new();
         for (row, (line, toks)) in grid.iter().enumerate() {
             if toks.len() != cols {
-                let col = toks.get(cols).map_or_else(|| toks.last().map_or(1, |t| t.col), |t| t.col);
+                // Too many cells: point at the first extra one; too few: after the last.
+                let after_last = toks.last().map_or(1, |t| t.col + t.text.chars().count());
+                let col = toks.get(cols).map_or(after_last, |t| t.col);
                 let kind = MapErrorKind::RaggedRow { expected: cols, found: toks.len() };
                 return Err(self.err(*line, col, kind));
             }
@@ -406,18 +423,26 @@ impl Parser<'_> {
                             return Err(self.err(*line, tok.col, kind));
                         };
                         if let Some(&(_, _, l, c)) = labels.get(&k) {
-                            let kind = MapErrorKind::DuplicateTarget { label: target_label(k - 1), line: l, col: c };
+                            let kind = MapErrorKind::DuplicateTarget {
+                                label: target_label(k - 1),
+                                line: l,
+                                col: c,
+                            };
                             return Err(self.err(*line, tok.col, kind));
                         }
                         if k > MAX_TARGETS {
-                            let kind = MapErrorKind::TooMany { what: "targets", found: k, max: MAX_TARGETS };
+                            let kind = MapErrorKind::TooMany {
+                                what: "targets",
+                                found: k,
+                                max: MAX_TARGETS,
+                            };
                             return Err(self.err(*line, tok.col, kind));
                         }
                         labels.insert(k, (row, col, *line, tok.col));
                         Cell::Free
                     }
                 };
-                cells.push(cell);
+                map.cells.push(cell);
             }
         }
         let Some((&highest, &(_, _, line, col))) = labels.last_key_value() else {
@@ -426,9 +451,9 @@ impl Parser<'_> {
         if let Some(missing) = (1..highest).find(|k| !labels.contains_key(k)) {
             return Err(self.err(line, col, MapErrorKind::TargetGap { missing, highest }));
         }
-        let targets = labels.values().map(|&(r, c, _, _)| (r, c)).collect();
-        let target_at = labels.values().map(|&(_, _, l, c)| (l, c)).collect();
-        Ok((cells, targets, target_at))
+        map.targets = labels.values().map(|&(r, c, _, _)| (r, c)).collect();
+        map.target_at = labels.values().map(|&(_, _, l, c)| (l, c)).collect();
+        Ok(())
     }
 
     /// The routes: within the limits, every waypoint a free cell of the grid.
@@ -437,7 +462,8 @@ impl Parser<'_> {
             return Err(self.err(self.n_lines, 1, MapErrorKind::NoRoutes));
         }
         if let Some(extra) = routes.get(MAX_AGENTS) {
-            let kind = MapErrorKind::TooMany { what: "routes", found: routes.len(), max: MAX_AGENTS };
+            let kind =
+                MapErrorKind::TooMany { what: "routes", found: routes.len(), max: MAX_AGENTS };
             return Err(self.err(extra.line, 1, kind));
         }
         for route in routes {
@@ -475,7 +501,8 @@ impl Parser<'_> {
             return Err(self.err(fact.line, fact.uav.col, kind));
         };
         let n = map.targets.len();
-        let Some(target) = numbered(fact.target.text, "T").filter(|&k| k <= n).map(|k| k - 1) else {
+        let Some(target) = numbered(fact.target.text, "T").filter(|&k| k <= n).map(|k| k - 1)
+        else {
             let kind = MapErrorKind::UnknownTarget { label: fact.target.text.to_string(), n };
             return Err(self.err(fact.line, fact.target.col, kind));
         };
@@ -483,7 +510,8 @@ impl Parser<'_> {
         let mut poses: Vec<Pose> = Vec::with_capacity(fact.poses.len());
         for raw in &fact.poses {
             if raw.wp > len {
-                let kind = MapErrorKind::BeyondRoute { what: "pose", wp: raw.wp, uav: uav_name(uav), len };
+                let kind =
+                    MapErrorKind::BeyondRoute { what: "pose", wp: raw.wp, uav: uav_name(uav), len };
                 return Err(self.err(fact.line, raw.at.col, kind));
             }
             let pose = Pose::new(raw.wp - 1, raw.height, raw.heading);
