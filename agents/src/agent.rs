@@ -99,6 +99,8 @@ pub struct TrialAgent {
     open: Option<(u8, u64)>,
     /// This agent ran `A-endEpisode` in the open episode and hovers.
     finished: bool,
+    /// Training episodes closed so far.
+    trained_episodes: u64,
 }
 
 impl TrialAgent {
@@ -119,11 +121,17 @@ impl TrialAgent {
             pose: spec.scenario.start_pose(),
             open: None,
             finished: false,
+            trained_episodes: 0,
         })
     }
 
     /// One tick of this trial: reads `obs`, writes this agent's part of the action.
-    pub fn act(&mut self, obs: &TrialObservation, live: u64, out: &mut TrialAction) -> Result<(), FieldError> {
+    pub fn act(
+        &mut self,
+        obs: &TrialObservation,
+        live: u64,
+        out: &mut TrialAction,
+    ) -> Result<(), FieldError> {
         out.clear();
         let view = &obs.agents[self.slot];
         view.pose.validate(self.route_len)?;
@@ -146,7 +154,13 @@ impl TrialAgent {
             return Ok(());
         }
         let mut ctx = UavTick {
-            body: Body { pose: self.pose, route_len: self.route_len, sees_target, ended: false, action: out },
+            body: Body {
+                pose: self.pose,
+                route_len: self.route_len,
+                sees_target,
+                ended: false,
+                action: out,
+            },
             states: &mut self.states,
             comm: &self.comm,
             state: None,
@@ -174,8 +188,11 @@ impl TrialAgent {
     /// truncated: the pending learning steps bootstrap from the state it ended in, which
     /// includes the flags sent in its last tick (relayed with this observation).
     fn close_episode(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
-        if self.open.take().is_none() {
+        let Some((phase, _)) = self.open.take() else {
             return Ok(());
+        };
+        if phase == Phase::Train as u8 {
+            self.trained_episodes += 1;
         }
         if !self.finished {
             self.hear(obs, live)?;
@@ -195,7 +212,13 @@ impl TrialAgent {
         self.finished = false;
         let mut scratch = TrialAction::default();
         let mut ctx = UavTick {
-            body: Body { pose: self.pose, route_len: self.route_len, sees_target: false, ended: false, action: &mut scratch },
+            body: Body {
+                pose: self.pose,
+                route_len: self.route_len,
+                sees_target: false,
+                ended: false,
+                action: &mut scratch,
+            },
             states: &mut self.states,
             comm: &self.comm,
             state: None,
@@ -205,6 +228,11 @@ impl TrialAgent {
 
     pub fn slot(&self) -> usize {
         self.slot
+    }
+
+    /// Training episodes this agent has completed in this trial.
+    pub fn trained_episodes(&self) -> u64 {
+        self.trained_episodes
     }
 
     pub fn tree(&self) -> &Tree {
@@ -244,7 +272,8 @@ impl UavAgent {
             return Err(AgentError::Trials { trials: spec.trials, max: MAX_TRIALS });
         }
         spec.params.validate().map_err(AgentError::Params)?;
-        let trials = (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
+        let trials =
+            (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
         Ok(UavAgent { slot: spec.slot, trials })
     }
 
@@ -254,7 +283,11 @@ impl UavAgent {
 
     /// The agent's half of a barrier round: one trial action per trial.
     pub fn act(&mut self, obs: &Observation, out: &mut Action) -> Result<(), FieldError> {
-        flockstep_proto::check_below("observation.n_trials", obs.n_trials.into(), self.trials.len() as u64 + 1)?;
+        flockstep_proto::check_below(
+            "observation.n_trials",
+            obs.n_trials.into(),
+            self.trials.len() as u64 + 1,
+        )?;
         if obs.n_trials as usize != self.trials.len() {
             return Err(FieldError {
                 field: "observation.n_trials",

@@ -9,7 +9,11 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
-#[command(name = "agent", version, about = "A flockstep UAV agent, and tools to inspect behavior trees")]
+#[command(
+    name = "agent",
+    version,
+    about = "A flockstep UAV agent, and tools to inspect behavior trees"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -44,12 +48,17 @@ enum BtCommand {
 /// The `agent` binary.
 pub fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG").unwrap_or_else(|_| "warn".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
+                .unwrap_or_else(|_| "warn".into()),
+        )
         .with_writer(std::io::stderr)
         .init();
     let result = match Cli::parse().command {
         Command::Bt { command: BtCommand::Show { tree } } => show(&tree),
-        Command::Bt { command: BtCommand::Replay { tree, script, seed } } => replay_files(&tree, &script, seed),
+        Command::Bt { command: BtCommand::Replay { tree, script, seed } } => {
+            replay_files(&tree, &script, seed)
+        }
         Command::Run(args) => crate::node::run(&args),
     };
     match result {
@@ -74,8 +83,9 @@ fn show(path: &PathBuf) -> Result<()> {
 fn replay_files(tree_path: &PathBuf, script_path: &PathBuf, seed: u64) -> Result<()> {
     let catalog = OpenCatalog::default();
     let tree = parse_tree(&tree_path.display().to_string(), &read(tree_path)?, &catalog)?;
-    let report = replay(&tree, &catalog, &script_path.display().to_string(), &read(script_path)?, seed)
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let report =
+        replay(&tree, &catalog, &script_path.display().to_string(), &read(script_path)?, seed)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
     print!("{report}");
     Ok(())
 }

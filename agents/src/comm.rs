@@ -60,7 +60,12 @@ impl CommState {
                 bits += 2 * len;
             }
         }
-        CommState { mode, offsets, route_lens: route_lens.to_vec(), words: vec![UNKNOWN; bits.div_ceil(64)] }
+        CommState {
+            mode,
+            offsets,
+            route_lens: route_lens.to_vec(),
+            words: vec![UNKNOWN; bits.div_ceil(64)],
+        }
     }
 
     /// A new episode: everything is unknown again.
@@ -88,7 +93,11 @@ impl CommState {
         if flags.valid == 0 {
             return Ok(false);
         }
-        flockstep_proto::check_below("flags.waypoint", flags.waypoint.into(), self.route_lens[peer] as u64)?;
+        flockstep_proto::check_below(
+            "flags.waypoint",
+            flags.waypoint.into(),
+            self.route_lens[peer] as u64,
+        )?;
         flockstep_proto::check_below("flags.sees_target", flags.sees_target.into(), 2)?;
         let value = if flags.sees_target == 1 { SEEN_ONE } else { SEEN_ZERO };
         let bit = offset + 2 * flags.waypoint as usize;

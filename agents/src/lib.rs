@@ -5,8 +5,10 @@
 
 pub mod agent;
 pub mod bt;
+pub mod cli;
 pub mod comm;
 pub mod learning;
+pub mod node;
 pub mod snapshot;
 pub mod state;
 pub mod uav;

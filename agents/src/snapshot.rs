@@ -61,7 +61,13 @@ impl Snapshot {
     }
 
     /// What `agent` has learned so far.
-    pub fn of(agent: &TrialAgent, scenario: &str, trial: usize, comm: CommMode, tree: &str, episodes: u64) -> Snapshot {
+    pub fn of(
+        agent: &TrialAgent,
+        scenario: &str,
+        trial: usize,
+        comm: CommMode,
+        tree: &str,
+    ) -> Snapshot {
         Snapshot {
             format: FORMAT,
             scenario: scenario.to_string(),
@@ -69,19 +75,29 @@ impl Snapshot {
             trial: trial as u32,
             comm,
             tree: tree.to_string(),
-            episodes,
+            episodes: agent.trained_episodes(),
             states: agent.states().keys().iter().map(|k| k.to_vec()).collect(),
             tables: agent.tree().tables().into_iter().cloned().collect(),
         }
     }
 
     /// Loads this snapshot into `agent` after checking it was learned on the same setup.
-    pub fn restore(&self, agent: &mut TrialAgent, scenario: &str, comm: CommMode, tree: &str) -> Result<(), SnapshotError> {
+    pub fn restore(
+        &self,
+        agent: &mut TrialAgent,
+        scenario: &str,
+        comm: CommMode,
+        tree: &str,
+    ) -> Result<(), SnapshotError> {
         let check = |what, found: &str, expected: &str| {
             if found == expected {
                 Ok(())
             } else {
-                Err(SnapshotError::Mismatch { what, found: found.to_string(), expected: expected.to_string() })
+                Err(SnapshotError::Mismatch {
+                    what,
+                    found: found.to_string(),
+                    expected: expected.to_string(),
+                })
             }
         };
         check("scenario", &self.scenario, scenario)?;
@@ -97,8 +113,10 @@ impl Snapshot {
                 )));
             }
         }
-        let states = StateSpace::from_keys(self.states.iter().map(|k| k.clone().into_boxed_slice()).collect())
-            .map_err(SnapshotError::Inconsistent)?;
+        let states = StateSpace::from_keys(
+            self.states.iter().map(|k| k.clone().into_boxed_slice()).collect(),
+        )
+        .map_err(SnapshotError::Inconsistent)?;
         agent.tree_mut().set_tables(self.tables.clone()).map_err(SnapshotError::Inconsistent)?;
         agent.set_states(states);
         Ok(())
@@ -119,16 +137,16 @@ pub fn write_snapshots(
     scenario: &str,
     comm: CommMode,
     tree: &str,
-    episodes: u64,
 ) -> std::io::Result<()> {
     for (trial, part) in agent.trials().iter().enumerate() {
         let path = snapshot_path(out, agent.slot(), trial);
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)?;
         }
-        let bytes = Snapshot::of(part, scenario, trial, comm, tree, episodes).encode();
-        std::fs::write(&path, bytes)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display())))?;
+        let bytes = Snapshot::of(part, scenario, trial, comm, tree).encode();
+        std::fs::write(&path, bytes).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display()))
+        })?;
     }
     Ok(())
 }

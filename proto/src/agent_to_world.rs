@@ -22,7 +22,13 @@ pub struct TrialAction {
 
 impl Default for TrialAction {
     fn default() -> Self {
-        TrialAction { n_commands: 0, ended: 0, commands: [0; MAX_COMMANDS], _reserved: [0; 6], flags: Flags::default() }
+        TrialAction {
+            n_commands: 0,
+            ended: 0,
+            commands: [0; MAX_COMMANDS],
+            _reserved: [0; 6],
+            flags: Flags::default(),
+        }
     }
 }
 
@@ -77,6 +83,11 @@ pub struct Action {
 
 impl Action {
     pub fn new(agent: usize) -> Action {
-        Action { round: 0, agent: agent as u32, n_trials: 0, trials: [TrialAction::default(); MAX_TRIALS] }
+        Action {
+            round: 0,
+            agent: agent as u32,
+            n_trials: 0,
+            trials: [TrialAction::default(); MAX_TRIALS],
+        }
     }
 }

@@ -17,6 +17,7 @@ pub mod pose;
 pub mod seed;
 pub mod services;
 pub mod supervisor_to_world;
+pub mod transport;
 pub mod world_to_agent;
 pub mod world_to_supervisor;
 
@@ -37,7 +38,11 @@ pub struct FieldError {
 
 impl std::fmt::Display for FieldError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "field `{}` = {} out of range (expected {})", self.field, self.value, self.expected)
+        write!(
+            f,
+            "field `{}` = {} out of range (expected {})",
+            self.field, self.value, self.expected
+        )
     }
 }
 

@@ -16,7 +16,8 @@ pub fn validate_run_id(run_id: &str) -> Result<(), String> {
     if run_id.is_empty() || run_id.len() > 40 {
         return Err(format!("run id `{run_id}` must have 1 to 40 characters"));
     }
-    if let Some(c) = run_id.chars().find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_')) {
+    if let Some(c) = run_id.chars().find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
+    {
         return Err(format!("run id `{run_id}` contains `{c}`; use letters, digits, `-` and `_`"));
     }
     Ok(())

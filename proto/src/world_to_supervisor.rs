@@ -27,6 +27,16 @@ pub struct EpisodeReport {
 
 impl Default for EpisodeReport {
     fn default() -> Self {
-        EpisodeReport { trial: 0, target: 0, phase: 0, _reserved: 0, episode: 0, start_tick: 0, members: 0, truncated: 0, lengths: [0; MAX_AGENTS] }
+        EpisodeReport {
+            trial: 0,
+            target: 0,
+            phase: 0,
+            _reserved: 0,
+            episode: 0,
+            start_tick: 0,
+            members: 0,
+            truncated: 0,
+            lengths: [0; MAX_AGENTS],
+        }
     }
 }

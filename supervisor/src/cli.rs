@@ -8,7 +8,11 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
-#[command(name = "supervisor", version, about = "Run flockstep experiments: UAVs learning behavior trees in lockstep")]
+#[command(
+    name = "supervisor",
+    version,
+    about = "Run flockstep experiments: UAVs learning behavior trees in lockstep"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,

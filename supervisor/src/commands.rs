@@ -12,8 +12,10 @@ use std::path::Path;
 pub fn optimum(spec: &str) -> Result<()> {
     let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
     for uav in 0..scenario.n_routes() {
-        let best = memoryless_optimum(&scenario, uav).map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
-        let known = optimum_with_known_target(&scenario, uav).map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
+        let best = memoryless_optimum(&scenario, uav)
+            .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
+        let known = optimum_with_known_target(&scenario, uav)
+            .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
         println!(
             "{} UAV{}: memoryless optimum {:.4} ticks (per target {:?}); knowing the target {:.4}",
             scenario.name(),
@@ -31,9 +33,12 @@ pub fn optimum(spec: &str) -> Result<()> {
 pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
     let mut loaded = Vec::new();
     for spec in curves {
-        let (path, label) = spec.split_once('=').with_context(|| format!("--curve `{spec}`: expected PATH=LABEL"))?;
+        let (path, label) = spec
+            .split_once('=')
+            .with_context(|| format!("--curve `{spec}`: expected PATH=LABEL"))?;
         loaded.push((label.to_string(), read_smoothed(Path::new(path), 1)?));
     }
-    let series: Vec<Series> = loaded.iter().map(|(label, values)| Series { label: label.clone(), values }).collect();
+    let series: Vec<Series> =
+        loaded.iter().map(|(label, values)| Series { label: label.clone(), values }).collect();
     plot_curves(out, title, &series, &[])
 }

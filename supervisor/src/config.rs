@@ -54,8 +54,10 @@ impl RunConfig {
         if args.tick_cap == 0 {
             bail!("--tick-cap must be at least 1");
         }
-        let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs).to_string());
-        let scenario = Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+        let scenario_arg =
+            args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs).to_string());
+        let scenario =
+            Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
         if args.uavs > scenario.n_routes() {
             bail!(
                 "--uavs {} but scenario `{}` has only {} route(s); use a scenario with more routes",
@@ -65,18 +67,25 @@ impl RunConfig {
             );
         }
         let comm = match &args.comm {
-            Some(c) => CommMode::parse(c).with_context(|| format!("--comm `{c}`: expected none or flags"))?,
+            Some(c) => CommMode::parse(c)
+                .with_context(|| format!("--comm `{c}`: expected none or flags"))?,
             None if args.uavs > 1 => CommMode::Flags,
             None => CommMode::None,
         };
         let tree = load_tree(args.bt.as_ref())?;
-        let params = LearnParams { alpha: args.alpha, gamma: args.gamma, epsilon: args.epsilon, learn: true };
+        let params = LearnParams {
+            alpha: args.alpha,
+            gamma: args.gamma,
+            epsilon: args.epsilon,
+            learn: true,
+        };
         params.validate().map_err(anyhow::Error::msg)?;
         let run_id = match &args.run_id {
             Some(id) => id.clone(),
             None => default_run_id(),
         };
-        flockstep_proto::services::validate_run_id(&run_id).map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
+        flockstep_proto::services::validate_run_id(&run_id)
+            .map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
         let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(&run_id));
         Ok(RunConfig {
             scenario_arg,
@@ -132,15 +141,20 @@ pub fn default_scenario(uavs: usize) -> &'static str {
 /// Reads and parses a tree file, or the built-in Fig. 5 tree.
 pub fn load_tree(path: Option<&PathBuf>) -> Result<TreeSpec> {
     match path {
-        None => Ok(parse_tree("fig5.bt", flockstep_agents::FIG5_TREE, &UavCatalog).expect("the built-in tree parses")),
+        None => Ok(parse_tree("fig5.bt", flockstep_agents::FIG5_TREE, &UavCatalog)
+            .expect("the built-in tree parses")),
         Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read tree file {}", path.display()))?;
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read tree file {}", path.display()))?;
             Ok(parse_tree(&path.display().to_string(), &text, &UavCatalog)?)
         }
     }
 }
 
 fn default_run_id() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
     format!("run-{}-{}", std::process::id(), secs)
 }

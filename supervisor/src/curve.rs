@@ -52,7 +52,8 @@ pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
     let mut text = String::from("episode,agent,mean_length,smoothed_length\n");
     for curve in curves {
         for (e, (mean, smooth)) in curve.mean.iter().zip(&curve.smoothed).enumerate() {
-            writeln!(text, "{e},{},{mean:.4},{smooth:.4}", curve.agent).expect("writing to a String");
+            writeln!(text, "{e},{},{mean:.4},{smooth:.4}", curve.agent)
+                .expect("writing to a String");
         }
     }
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
@@ -60,12 +61,21 @@ pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
 
 /// Reads agent `agent`'s smoothed curve back from a `curve.csv`.
 pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut values = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let fields: Vec<&str> = line.split(',').collect();
-        let parse = || -> Option<(usize, f64)> { Some((fields.get(1)?.parse().ok()?, fields.get(3)?.parse().ok()?)) };
-        let (row_agent, smoothed) = parse().with_context(|| format!("{}:{}: expected episode,agent,mean_length,smoothed_length", path.display(), i + 1))?;
+        let parse = || -> Option<(usize, f64)> {
+            Some((fields.get(1)?.parse().ok()?, fields.get(3)?.parse().ok()?))
+        };
+        let (row_agent, smoothed) = parse().with_context(|| {
+            format!(
+                "{}:{}: expected episode,agent,mean_length,smoothed_length",
+                path.display(),
+                i + 1
+            )
+        })?;
         if row_agent == agent {
             values.push(smoothed);
         }

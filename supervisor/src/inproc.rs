@@ -13,18 +13,27 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Runs the whole experiment; returns `true` if it ran to the end, `false` if stopped.
 pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Result<bool> {
-    let mut world = World::new(config.scenario.clone(), config.uavs, config.trials, config.seed, config.episodes)?;
+    let mut world = World::new(
+        config.scenario.clone(),
+        config.uavs,
+        config.trials,
+        config.seed,
+        config.episodes,
+    )?;
     let mut agents = (0..config.uavs)
         .map(|slot| UavAgent::new(&config.agent_spec(slot)))
         .collect::<Result<Vec<_>, _>>()?;
     let mut observation = Box::<Observation>::default();
-    let mut actions: Vec<Box<Action>> = (0..config.uavs).map(|slot| Box::new(Action::new(slot))).collect();
+    let mut actions: Vec<Box<Action>> =
+        (0..config.uavs).map(|slot| Box::new(Action::new(slot))).collect();
     let mut reports = Vec::new();
     recorder.set_live(config.uavs);
     let finished = loop {
         world.observe(&mut observation);
         for (agent, action) in agents.iter_mut().zip(actions.iter_mut()) {
-            agent.act(&observation, action).with_context(|| format!("agent {}", agent.slot() + 1))?;
+            agent
+                .act(&observation, action)
+                .with_context(|| format!("agent {}", agent.slot() + 1))?;
         }
         if observation.kind == ObservationKind::Stop as u8 {
             break true;
@@ -39,12 +48,11 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         for report in reports.drain(..) {
             recorder.record(&report)?;
         }
-        recorder.round(world.round());
+        recorder.redraw();
     };
-    let episodes = recorder.collector().train_episodes() / config.trials as u64;
     let tree = config.tree_text();
     for agent in &agents {
-        write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree, episodes)?;
+        write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)?;
     }
     Ok(finished)
 }

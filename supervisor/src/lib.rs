@@ -1,6 +1,7 @@
 //! The supervisor: runs experiments, in one process or as one world and N agent processes,
 //! and turns what the world reports into a results directory.
 
+pub mod children;
 pub mod cli;
 pub mod config;
 pub mod curve;
@@ -24,7 +25,10 @@ pub const EXIT_INTERRUPTED: i32 = 130;
 /// The `supervisor` binary.
 pub fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG").unwrap_or_else(|_| "warn".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
+                .unwrap_or_else(|_| "warn".into()),
+        )
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
@@ -40,7 +44,9 @@ pub fn main() -> std::process::ExitCode {
 fn dispatch(cli: Cli) -> Result<u8> {
     match cli.command {
         Some(Command::Optimum { scenario }) => commands::optimum(&scenario).map(|()| 0),
-        Some(Command::Plot { curves, out, title }) => commands::plot(&curves, &out, &title).map(|()| 0),
+        Some(Command::Plot { curves, out, title }) => {
+            commands::plot(&curves, &out, &title).map(|()| 0)
+        }
         None => {
             let config = config::RunConfig::resolve(&cli.run)?;
             let stop = Arc::new(AtomicBool::new(false));

@@ -29,10 +29,18 @@ const COLORS: [RGBColor; 8] = [
 ];
 
 /// Draws `series` (x = iteration, y = episode length) and `references` into an SVG file.
-pub fn plot_curves(path: &Path, title: &str, series: &[Series], references: &[Reference]) -> Result<()> {
+pub fn plot_curves(
+    path: &Path,
+    title: &str,
+    series: &[Series],
+    references: &[Reference],
+) -> Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow!("cannot draw {}: {e}", path.display());
     let episodes = series.iter().map(|s| s.values.len()).max().unwrap_or(0).max(1);
-    let all = series.iter().flat_map(|s| s.values.iter().copied()).chain(references.iter().map(|r| r.value));
+    let all = series
+        .iter()
+        .flat_map(|s| s.values.iter().copied())
+        .chain(references.iter().map(|r| r.value));
     let top = all.fold(1.0f64, f64::max) * 1.05;
     let root = SVGBackend::new(path, (960, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
@@ -58,13 +66,20 @@ pub fn plot_curves(path: &Path, title: &str, series: &[Series], references: &[Re
             .draw_series(LineSeries::new(points, color.stroke_width(2)))
             .map_err(|e| err(&e))?
             .label(s.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
     }
     for (i, r) in references.iter().enumerate() {
         let color = COLORS[(series.len() + i) % COLORS.len()];
         let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
         chart
-            .draw_series(DashedLineSeries::new([(0.0, r.value), (episodes as f64, r.value)], 6, 4, style))
+            .draw_series(DashedLineSeries::new(
+                [(0.0, r.value), (episodes as f64, r.value)],
+                6,
+                4,
+                style,
+            ))
             .map_err(|e| err(&e))?
             .label(format!("{} ({:.2})", r.label, r.value))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));

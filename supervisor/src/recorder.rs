@@ -15,7 +15,6 @@ pub struct Recorder {
     bar: ProgressBar,
     started: Instant,
     last_draw: Instant,
-    rounds: u64,
     env_steps: u64,
     live: usize,
 }
@@ -23,14 +22,20 @@ pub struct Recorder {
 impl Recorder {
     /// `total` is the number of training episodes over every trial.
     pub fn new(collector: Collector, total: u64, quiet: bool) -> Recorder {
-        let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr()) };
+        let bar = if quiet {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+        };
         bar.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}")
-                .expect("a valid template")
-                .progress_chars("=> "),
+            ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}",
+            )
+            .expect("a valid template")
+            .progress_chars("=> "),
         );
         let now = Instant::now();
-        Recorder { collector, bar, started: now, last_draw: now, rounds: 0, env_steps: 0, live: 0 }
+        Recorder { collector, bar, started: now, last_draw: now, env_steps: 0, live: 0 }
     }
 
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
@@ -47,18 +52,23 @@ impl Recorder {
         Ok(())
     }
 
-    /// Called after each barrier round; redraws the message a few times a second.
-    pub fn round(&mut self, rounds: u64) {
-        self.rounds = rounds;
+    /// Redraws the progress message, at most a few times a second.
+    pub fn redraw(&mut self) {
         if self.last_draw.elapsed() < Duration::from_millis(200) {
             return;
         }
         self.last_draw = Instant::now();
         let recent = self.collector.train_lengths().first().map(|trials| {
-            let tail: Vec<u32> = trials.iter().flat_map(|t| t[t.len().saturating_sub(RECENT / trials.len().max(1))..].iter().copied()).collect();
+            let tail: Vec<u32> = trials
+                .iter()
+                .flat_map(|t| {
+                    t[t.len().saturating_sub(RECENT / trials.len().max(1))..].iter().copied()
+                })
+                .collect();
             tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
         });
-        let ticks_per_s = self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
+        let ticks_per_s =
+            self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
         self.bar.set_message(format!(
             "mean length {:.1}  {:.0} ticks/s  {} live agents",
             recent.unwrap_or(0.0),
@@ -78,10 +88,6 @@ impl Recorder {
 
     pub fn collector(&self) -> &Collector {
         &self.collector
-    }
-
-    pub fn rounds(&self) -> u64 {
-        self.rounds
     }
 
     pub fn env_steps(&self) -> u64 {

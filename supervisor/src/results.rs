@@ -41,7 +41,9 @@ impl Collector {
     pub fn create(dir: &Path, agents: usize, trials: usize) -> Result<Collector> {
         let open = |name: &str| -> Result<BufWriter<File>> {
             let path = dir.join(name);
-            let mut file = BufWriter::new(File::create(&path).with_context(|| format!("cannot write {}", path.display()))?);
+            let mut file = BufWriter::new(
+                File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
+            );
             file.write_all(CSV_HEADER.as_bytes())?;
             Ok(file)
         };
@@ -59,9 +61,13 @@ impl Collector {
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
         let trial = report.trial as usize;
         if trial >= self.ticks.len() {
-            anyhow::bail!("episode report for trial {trial}, but the run has {} trials", self.ticks.len());
+            anyhow::bail!(
+                "episode report for trial {trial}, but the run has {} trials",
+                self.ticks.len()
+            );
         }
-        let phase = Phase::from_u8(report.phase).with_context(|| format!("episode report with phase {}", report.phase))?;
+        let phase = Phase::from_u8(report.phase)
+            .with_context(|| format!("episode report with phase {}", report.phase))?;
         let end = (0..MAX_AGENTS)
             .filter(|&slot| report.members & (1 << slot) != 0)
             .map(|slot| report.start_tick + u64::from(report.lengths[slot]))
@@ -74,7 +80,15 @@ impl Collector {
             }
             let length = report.lengths[slot];
             let truncated = report.truncated >> slot & 1;
-            let line = format!("{},{},{},{},{},{}\n", trial, slot + 1, report.episode, report.start_tick, length, truncated);
+            let line = format!(
+                "{},{},{},{},{},{}\n",
+                trial,
+                slot + 1,
+                report.episode,
+                report.start_tick,
+                length,
+                truncated
+            );
             match phase {
                 Phase::Train => {
                     self.episodes_csv.write_all(line.as_bytes())?;
@@ -148,6 +162,12 @@ impl Collector {
             }
         }
         (stats.episodes > 0).then_some(stats)
+    }
+
+    /// Barrier rounds: every round advances each trial that is not done by one tick, and
+    /// all trials start together, so the rounds are the longest trial's ticks.
+    pub fn rounds(&self) -> u64 {
+        self.ticks.iter().copied().max().unwrap_or(0)
     }
 
     /// Ticks run in all trials together.

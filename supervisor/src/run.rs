@@ -29,22 +29,28 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     let mut recorder = Recorder::new(collector, total, config.quiet);
     let started = Instant::now();
     let result = match config.transport {
-        Transport::Inproc => crate::inproc::run(config, &mut recorder, stop).map(|complete| Outcome { complete, notes: vec![] }),
+        Transport::Inproc => crate::inproc::run(config, &mut recorder, stop)
+            .map(|complete| Outcome { complete, notes: vec![] }),
         Transport::Shm => crate::shm::run(config, &mut recorder, stop),
     };
     let wall = started.elapsed().as_secs_f64();
     recorder.finish()?;
     // Whatever happened, what was collected is written before the error is reported.
-    let outcome = result.as_ref().map(Outcome::clone).unwrap_or_else(|e| Outcome { complete: false, notes: vec![format!("{e:#}")] });
+    let outcome = result
+        .as_ref()
+        .map(Outcome::clone)
+        .unwrap_or_else(|e| Outcome { complete: false, notes: vec![format!("{e:#}")] });
     write_results(config, &recorder, wall, &outcome)?;
     result
 }
 
 /// Creates the results directory and checks it can be written, before any process starts.
 fn prepare_out_dir(config: &RunConfig) -> Result<()> {
-    std::fs::create_dir_all(&config.out).with_context(|| format!("cannot create results directory {}", config.out.display()))?;
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("cannot create results directory {}", config.out.display()))?;
     let probe = config.out.join(".write-test");
-    std::fs::write(&probe, b"").with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
     std::fs::remove_file(&probe).ok();
     std::fs::write(config.out.join("scenario.map"), config.scenario.source_text())
         .with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
@@ -53,12 +59,27 @@ fn prepare_out_dir(config: &RunConfig) -> Result<()> {
     Ok(())
 }
 
-fn write_results(config: &RunConfig, recorder: &Recorder, wall: f64, outcome: &Outcome) -> Result<()> {
+fn write_results(
+    config: &RunConfig,
+    recorder: &Recorder,
+    wall: f64,
+    outcome: &Outcome,
+) -> Result<()> {
     let curves = curve::curves(recorder.collector().train_lengths(), config.smoothing);
     curve::write_csv(&config.out.join("curve.csv"), &curves)?;
-    let series: Vec<Series> =
-        curves.iter().map(|c| Series { label: format!("UAV{} (mean of {} trials)", c.agent, config.trials), values: &c.smoothed }).collect();
-    let title = format!("{} | comm {} | {} episodes", config.scenario.name(), config.comm.name(), config.episodes.train_episodes);
+    let series: Vec<Series> = curves
+        .iter()
+        .map(|c| Series {
+            label: format!("UAV{} (mean of {} trials)", c.agent, config.trials),
+            values: &c.smoothed,
+        })
+        .collect();
+    let title = format!(
+        "{} | comm {} | {} episodes",
+        config.scenario.name(),
+        config.comm.name(),
+        config.episodes.train_episodes
+    );
     plot_curves(&config.out.join("curve.svg"), &title, &series, &[])?;
     let value = summary::summary(config, recorder, wall, outcome.complete, &outcome.notes);
     summary::write(&config.out.join("summary.json"), &value)

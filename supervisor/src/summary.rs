@@ -10,7 +10,13 @@ use std::path::Path;
 /// Window of `final_mean_episode_length`: UAV1's last 1000 training episodes per trial.
 pub const FINAL_WINDOW: usize = 1000;
 
-pub fn summary(config: &RunConfig, recorder: &Recorder, wall_seconds: f64, complete: bool, notes: &[String]) -> Value {
+pub fn summary(
+    config: &RunConfig,
+    recorder: &Recorder,
+    wall_seconds: f64,
+    complete: bool,
+    notes: &[String],
+) -> Value {
     let collector = recorder.collector();
     let agents = collector.agents();
     let greedy: Vec<_> = (0..agents).map(|a| collector.greedy(a)).collect();
@@ -39,11 +45,11 @@ pub fn summary(config: &RunConfig, recorder: &Recorder, wall_seconds: f64, compl
         "tree_file": config.bt_path.as_ref().map(|p| p.display().to_string()),
         "smoothing_window": config.smoothing,
         "ticks": ticks,
-        "rounds": recorder.rounds(),
+        "rounds": collector.rounds(),
         "env_steps": recorder.env_steps(),
         "wall_seconds": wall_seconds,
         "ticks_per_second": per_second(ticks),
-        "rounds_per_second": per_second(recorder.rounds()),
+        "rounds_per_second": per_second(collector.rounds()),
         "env_steps_per_second": per_second(recorder.env_steps()),
         "final_window": FINAL_WINDOW,
         "final_mean_episode_length": (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect::<Vec<_>>().first().cloned().flatten(),

@@ -6,9 +6,11 @@
 //! - [`optimum`]: the exact best expected episode length of one UAV, the yardstick for
 //!   learning curves.
 //! - [`sim`]: episodes and the ground truth of one trial.
+//! - [`node`]: the `world` process around [`sim::World`].
 
 pub mod error;
 pub mod map;
+pub mod node;
 pub mod optimum;
 pub mod scenario;
 pub mod sim;

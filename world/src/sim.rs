@@ -58,9 +58,17 @@ pub struct TrialWorld {
 
 impl TrialWorld {
     /// Trial `trial` of a run seeded with `seed`, with agent slots `members` taking part.
-    pub fn new(scenario: Arc<Scenario>, trial: usize, run_seed: u64, config: EpisodeConfig, members: u64) -> Self {
+    pub fn new(
+        scenario: Arc<Scenario>,
+        trial: usize,
+        run_seed: u64,
+        config: EpisodeConfig,
+        members: u64,
+    ) -> Self {
         let slots = scenario.n_routes();
-        let rng = |stream| Xoshiro256PlusPlus::seed_from_u64(seed::derive(run_seed, &[stream, trial as u64]));
+        let rng = |stream| {
+            Xoshiro256PlusPlus::seed_from_u64(seed::derive(run_seed, &[stream, trial as u64]))
+        };
         let mut world = TrialWorld {
             trial: trial as u32,
             config,
@@ -259,7 +267,8 @@ impl World {
     pub fn observe(&self, out: &mut Observation) {
         out.round = self.round;
         out.live = self.live;
-        out.kind = if self.all_done() { ObservationKind::Stop } else { ObservationKind::Tick } as u8;
+        out.kind =
+            if self.all_done() { ObservationKind::Stop } else { ObservationKind::Tick } as u8;
         out.n_trials = self.trials.len() as u32;
         for (trial, slot) in self.trials.iter().zip(out.trials.iter_mut()) {
             trial.observe(slot);
@@ -272,10 +281,18 @@ impl World {
         let slot = action.agent as usize;
         flockstep_proto::check_below("action.agent", slot as u64, MAX_AGENTS as u64)?;
         if self.live & (1 << slot) == 0 {
-            return Err(FieldError { field: "action.agent", value: slot as u64, expected: "a live agent slot".into() });
+            return Err(FieldError {
+                field: "action.agent",
+                value: slot as u64,
+                expected: "a live agent slot".into(),
+            });
         }
         if action.round != self.round {
-            return Err(FieldError { field: "action.round", value: action.round, expected: format!("{}", self.round) });
+            return Err(FieldError {
+                field: "action.round",
+                value: action.round,
+                expected: format!("{}", self.round),
+            });
         }
         if action.n_trials as usize != self.trials.len() {
             return Err(FieldError {

@@ -1,0 +1,361 @@
+//! Each role's ports on the run's services: what the world, an agent and the supervisor
+//! publish, read and wait on. Every publish is followed by a notify on the reader's wake-up
+//! event.
+
+use super::{
+    termination_requested, Ipc, RunServices, TransportError, Waiter, WAKE_AGENTS, WAKE_SUPERVISOR,
+    WAKE_WORLD,
+};
+use crate::services::{ACTIONS, CONTROL, EPISODES, OBSERVATIONS};
+use crate::supervisor_to_world::Control;
+use crate::{Action, EpisodeReport, Observation};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::service::port_factory::event;
+use std::time::{Duration, Instant};
+
+/// An observation as the agent reads it: straight from shared memory, no copy.
+pub type ObservationSample = Sample<Ipc, Observation, ()>;
+
+impl RunServices {
+    /// The world's ports.
+    pub fn into_world(self) -> Result<WorldPorts, TransportError> {
+        let report_timeout = self.run.report_timeout;
+        let episodes = self
+            .episodes
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+            // Blocks while the supervisor's buffer is full, but never forever: past the bound
+            // (or on SIGTERM) the send fails and the world reports a stalled supervisor.
+            .set_backpressure_handler(move |info: &BackpressureInfo| {
+                if termination_requested() || info.elapsed_time >= report_timeout {
+                    BackpressureAction::DiscardDataAndFail
+                } else {
+                    BackpressureAction::Retry
+                }
+            })
+            .create()
+            .map_err(|e| self.port_err(EPISODES, "creating the publisher", e))?;
+        Ok(WorldPorts {
+            observations: self
+                .observations
+                .publisher_builder()
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| self.port_err(OBSERVATIONS, "creating the publisher", e))?,
+            actions: self
+                .actions
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(ACTIONS, "creating the subscriber", e))?,
+            episodes,
+            control: self
+                .control
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(CONTROL, "creating the subscriber", e))?,
+            wake_agents: self.notifier(&self.wake_agents, WAKE_AGENTS)?,
+            wake_supervisor: self.notifier(&self.wake_supervisor, WAKE_SUPERVISOR)?,
+            waiter: self.waiter(&self.wake_world, WAKE_WORLD)?,
+            services: self,
+        })
+    }
+
+    /// An agent's ports. The listener comes first, so once the world counts an agent's
+    /// subscriber, its wake-ups can no longer be missed.
+    pub fn into_agent(self) -> Result<AgentPorts, TransportError> {
+        let waiter = self.waiter(&self.wake_agents, WAKE_AGENTS)?;
+        Ok(AgentPorts {
+            observations: self
+                .observations
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(OBSERVATIONS, "creating the subscriber", e))?,
+            actions: self
+                .actions
+                .publisher_builder()
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| self.port_err(ACTIONS, "creating the publisher", e))?,
+            wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
+            waiter,
+            services: self,
+        })
+    }
+
+    /// The supervisor's ports.
+    pub fn into_supervisor(self) -> Result<SupervisorPorts, TransportError> {
+        let waiter = self.waiter(&self.wake_supervisor, WAKE_SUPERVISOR)?;
+        Ok(SupervisorPorts {
+            episodes: self
+                .episodes
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(EPISODES, "creating the subscriber", e))?,
+            control: self
+                .control
+                .publisher_builder()
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| self.port_err(CONTROL, "creating the publisher", e))?,
+            wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
+            waiter,
+            services: self,
+        })
+    }
+
+    fn notifier(
+        &self,
+        service: &event::PortFactory<Ipc>,
+        what: &str,
+    ) -> Result<Notifier<Ipc>, TransportError> {
+        service
+            .notifier_builder()
+            .create()
+            .map_err(|e| self.port_err(what, "creating the notifier", e))
+    }
+
+    fn waiter(
+        &self,
+        service: &event::PortFactory<Ipc>,
+        what: &str,
+    ) -> Result<Waiter, TransportError> {
+        let listener = service
+            .listener_builder()
+            .create()
+            .map_err(|e| self.port_err(what, "creating the listener", e))?;
+        Ok(Waiter::new(listener, self.run.wait, &self.run.run_id, what))
+    }
+
+    fn port_err(
+        &self,
+        service: &str,
+        op: &'static str,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> TransportError {
+        port_error(&self.run.run_id, service, op, e)
+    }
+}
+
+fn port_error(
+    run: &str,
+    service: &str,
+    op: &'static str,
+    e: impl std::error::Error + Send + Sync + 'static,
+) -> TransportError {
+    TransportError::Port { run: run.into(), service: service.into(), op, source: Box::new(e) }
+}
+
+/// Who is connected, as the world sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Peers {
+    pub observation_subscribers: usize,
+    pub action_publishers: usize,
+    pub agent_listeners: usize,
+    pub episode_subscribers: usize,
+    pub supervisor_listeners: usize,
+}
+
+/// The world's side: publishes observations and episode records, reads actions and control.
+pub struct WorldPorts {
+    observations: Publisher<Ipc, Observation, ()>,
+    actions: Subscriber<Ipc, Action, ()>,
+    episodes: Publisher<Ipc, EpisodeReport, ()>,
+    control: Subscriber<Ipc, Control, ()>,
+    wake_agents: Notifier<Ipc>,
+    wake_supervisor: Notifier<Ipc>,
+    waiter: Waiter,
+    services: RunServices,
+}
+
+impl WorldPorts {
+    /// Broadcasts one round to every agent and wakes them.
+    pub fn publish_observation(&self, observation: &Observation) -> Result<(), TransportError> {
+        let loan = self
+            .observations
+            .loan_uninit()
+            .map_err(|e| self.err(OBSERVATIONS, "loaning a sample", e))?;
+        loan.write_payload(*observation)
+            .send()
+            .map_err(|e| self.err(OBSERVATIONS, "sending", e))?;
+        self.wake_agents.notify().map_err(|e| self.err(WAKE_AGENTS, "notifying", e))?;
+        Ok(())
+    }
+
+    /// The next action in arrival order, if any.
+    pub fn try_action(&self) -> Result<Option<Action>, TransportError> {
+        let sample = self.actions.receive().map_err(|e| self.err(ACTIONS, "receiving", e))?;
+        Ok(sample.map(|s| *s))
+    }
+
+    /// Hands one record to the supervisor. Waits (bounded by `report_timeout`) while the
+    /// supervisor's buffer is full; never drops a record silently.
+    pub fn publish_episode(&self, report: &EpisodeReport) -> Result<(), TransportError> {
+        match self.episodes.send_copy(*report) {
+            Ok(_) => {}
+            Err(SendError::UnableToDeliver) => {
+                return Err(TransportError::ReportsStalled {
+                    run: self.services.run.run_id.clone(),
+                    service: EPISODES.into(),
+                    waited: self.services.run.report_timeout,
+                })
+            }
+            Err(e) => return Err(self.err(EPISODES, "sending", e)),
+        }
+        self.wake_supervisor.notify().map_err(|e| self.err(WAKE_SUPERVISOR, "notifying", e))?;
+        Ok(())
+    }
+
+    /// The next control command, if any.
+    pub fn try_control(&self) -> Result<Option<Control>, TransportError> {
+        let sample = self.control.receive().map_err(|e| self.err(CONTROL, "receiving", e))?;
+        Ok(sample.map(|s| *s))
+    }
+
+    /// Hands the newest observation (history) to agents that subscribed since the last
+    /// publish; iceoryx2 delivers history only when the publisher updates its connections.
+    pub fn serve_late_joiners(&self) -> Result<(), TransportError> {
+        self.observations
+            .update_connections()
+            .map_err(|e| self.err(OBSERVATIONS, "updating connections", e))
+    }
+
+    /// Woken by actions and control commands.
+    pub fn waiter(&self) -> &Waiter {
+        &self.waiter
+    }
+
+    pub fn peers(&self) -> Peers {
+        let s = &self.services;
+        Peers {
+            observation_subscribers: s.observations.dynamic_config().number_of_subscribers(),
+            action_publishers: s.actions.dynamic_config().number_of_publishers(),
+            agent_listeners: s.wake_agents.dynamic_config().number_of_listeners(),
+            episode_subscribers: s.episodes.dynamic_config().number_of_subscribers(),
+            supervisor_listeners: s.wake_supervisor.dynamic_config().number_of_listeners(),
+        }
+    }
+
+    /// Start-up barrier: waits until `agents` agents (and the supervisor, if `supervisor`)
+    /// have all their ports, since a sample published before a subscriber connects is lost.
+    pub fn wait_for_peers(
+        &self,
+        agents: usize,
+        supervisor: bool,
+        timeout: Duration,
+    ) -> Result<(), TransportError> {
+        let start = Instant::now();
+        loop {
+            let p = self.peers();
+            let sup = usize::from(supervisor);
+            let mut missing = Vec::new();
+            for (have, need, what) in [
+                (p.observation_subscribers, agents, "observation subscribers"),
+                (p.action_publishers, agents, "action publishers"),
+                (p.agent_listeners, agents, "agent listeners"),
+                (p.episode_subscribers, sup, "episode subscribers"),
+                (p.supervisor_listeners, sup, "supervisor listeners"),
+            ] {
+                if have < need {
+                    missing.push(format!("{what} {have}/{need}"));
+                }
+            }
+            if missing.is_empty() {
+                return Ok(());
+            }
+            let waited = start.elapsed();
+            if waited >= timeout || termination_requested() {
+                return Err(TransportError::PeersMissing {
+                    run: self.services.run.run_id.clone(),
+                    missing: missing.join(", "),
+                    waited,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// The run's services, e.g. to clean up after agents that died.
+    pub fn services(&self) -> &RunServices {
+        &self.services
+    }
+
+    fn err(
+        &self,
+        service: &str,
+        op: &'static str,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> TransportError {
+        port_error(&self.services.run.run_id, service, op, e)
+    }
+}
+
+/// An agent's side: reads observations, publishes actions.
+pub struct AgentPorts {
+    observations: Subscriber<Ipc, Observation, ()>,
+    actions: Publisher<Ipc, Action, ()>,
+    wake_world: Notifier<Ipc>,
+    waiter: Waiter,
+    services: RunServices,
+}
+
+impl AgentPorts {
+    /// The next observation, read in place in shared memory.
+    pub fn try_observation(&self) -> Result<Option<ObservationSample>, TransportError> {
+        self.observations
+            .receive()
+            .map_err(|e| port_error(&self.services.run.run_id, OBSERVATIONS, "receiving", e))
+    }
+
+    /// Answers a round and wakes the world.
+    pub fn publish_action(&self, action: &Action) -> Result<(), TransportError> {
+        let run = &self.services.run.run_id;
+        self.actions.send_copy(*action).map_err(|e| port_error(run, ACTIONS, "sending", e))?;
+        self.wake_world.notify().map_err(|e| port_error(run, WAKE_WORLD, "notifying", e))?;
+        Ok(())
+    }
+
+    /// Woken by observations.
+    pub fn waiter(&self) -> &Waiter {
+        &self.waiter
+    }
+}
+
+/// The supervisor's side: reads episode records, sends control commands.
+pub struct SupervisorPorts {
+    episodes: Subscriber<Ipc, EpisodeReport, ()>,
+    control: Publisher<Ipc, Control, ()>,
+    wake_world: Notifier<Ipc>,
+    waiter: Waiter,
+    services: RunServices,
+}
+
+impl SupervisorPorts {
+    /// The next episode record, if any.
+    pub fn try_episode(&self) -> Result<Option<EpisodeReport>, TransportError> {
+        let sample = self
+            .episodes
+            .receive()
+            .map_err(|e| port_error(&self.services.run.run_id, EPISODES, "receiving", e))?;
+        Ok(sample.map(|s| *s))
+    }
+
+    /// Sends a command and wakes the world, which may be blocked waiting for agents.
+    pub fn send_control(&self, control: &Control) -> Result<(), TransportError> {
+        let run = &self.services.run.run_id;
+        self.control.send_copy(*control).map_err(|e| port_error(run, CONTROL, "sending", e))?;
+        self.wake_world.notify().map_err(|e| port_error(run, WAKE_WORLD, "notifying", e))?;
+        Ok(())
+    }
+
+    /// Woken by episode records.
+    pub fn waiter(&self) -> &Waiter {
+        &self.waiter
+    }
+}

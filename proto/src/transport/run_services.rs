@@ -1,0 +1,310 @@
+//! The run's services: their limits and QoS, created by the world or opened by the others.
+
+use super::{
+    setup, termination_requested, Ipc, RunConfig, RunNode, TransportError, WAKE_AGENTS,
+    WAKE_SUPERVISOR, WAKE_WORLD,
+};
+use crate::limits::MAX_AGENTS;
+use crate::services::{self, ACTIONS, CONTROL, EPISODES, OBSERVATIONS};
+use crate::supervisor_to_world::Control;
+use crate::{Action, EpisodeReport, Observation};
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::{EventCreateError, EventOpenError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeCreateError, PublishSubscribeOpenError,
+};
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use std::fmt::Debug;
+use std::time::{Duration, Instant};
+
+/// Ports and nodes beyond the planned ones: a test or tool peeking at a run, or a restarted
+/// process whose dead predecessor has not been cleaned up yet.
+pub const SPARE: usize = 4;
+/// Nodes one run may hold: every agent, the world, the supervisor and the spares.
+pub const MAX_NODES: usize = MAX_AGENTS + 2 + SPARE;
+/// Episode records the supervisor's buffer holds before the world has to wait for it.
+pub const EPISODE_BUFFER: usize = 1024;
+/// Pause between attempts while the world has not created a service yet.
+const OPEN_RETRY: Duration = Duration::from_millis(5);
+
+/// Limits and QoS of one publish/subscribe service. The world creates the service with them;
+/// openers require at least them, so a binary built with other limits fails at open time with
+/// a clear error instead of misbehaving later.
+struct PubSubQos {
+    publishers: usize,
+    subscribers: usize,
+    buffer: usize,
+    history: usize,
+    safe_overflow: bool,
+}
+
+/// World -> agents. Safe overflow: a hung agent must never block the world; a live agent
+/// reads every round before the next one exists. History 1 lets an agent that attaches late
+/// read the current round (delivered on the world's next publish or `serve_late_joiners`).
+const OBSERVATIONS_QOS: PubSubQos = PubSubQos {
+    publishers: 1 + SPARE,
+    subscribers: MAX_AGENTS + SPARE,
+    buffer: 2,
+    history: 1,
+    safe_overflow: true,
+};
+/// Agents -> world. Each agent has one action in flight per round; safe overflow keeps the
+/// newest, so a rogue sender cannot block itself or the world (stale rounds are dropped by
+/// the world's round check).
+const ACTIONS_QOS: PubSubQos = PubSubQos {
+    publishers: MAX_AGENTS + SPARE,
+    subscribers: 1 + SPARE,
+    buffer: 2,
+    history: 0,
+    safe_overflow: true,
+};
+/// World -> supervisor. No record may be lost: no safe overflow, a deep buffer, and a
+/// publisher that waits (bounded by `report_timeout`) when the supervisor falls behind. Few
+/// subscribers, since every one of them must drain or the world stalls.
+const EPISODES_QOS: PubSubQos = PubSubQos {
+    publishers: 1 + 1,
+    subscribers: 1 + 1,
+    buffer: EPISODE_BUFFER,
+    history: 0,
+    safe_overflow: false,
+};
+/// Supervisor -> world. Commands are idempotent, so keeping the newest is enough.
+const CONTROL_QOS: PubSubQos = PubSubQos {
+    publishers: 1 + SPARE,
+    subscribers: 1 + SPARE,
+    buffer: 4,
+    history: 0,
+    safe_overflow: true,
+};
+
+fn pubsub<T: Debug + ZeroCopySend>(
+    node: &Node<Ipc>,
+    name: &ServiceName,
+    qos: &PubSubQos,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<T, (), Ipc> {
+    node.service_builder(name)
+        .publish_subscribe::<T>()
+        .max_publishers(qos.publishers)
+        .max_subscribers(qos.subscribers)
+        .max_nodes(MAX_NODES)
+        .subscriber_max_buffer_size(qos.buffer)
+        .history_size(qos.history)
+        .enable_safe_overflow(qos.safe_overflow)
+        // An agent may keep last round's observation while it reads the new one.
+        .subscriber_max_borrowed_samples(2)
+}
+
+/// Limits of one wake-up event service: who may wake whom.
+struct WakeQos {
+    notifiers: usize,
+    listeners: usize,
+}
+
+/// Every agent and the supervisor wake the world.
+const WAKE_WORLD_QOS: WakeQos = WakeQos { notifiers: MAX_AGENTS + 1 + SPARE, listeners: 1 + SPARE };
+/// The world wakes every agent.
+const WAKE_AGENTS_QOS: WakeQos = WakeQos { notifiers: 1 + SPARE, listeners: MAX_AGENTS + SPARE };
+/// The world wakes the supervisor.
+const WAKE_SUPERVISOR_QOS: WakeQos = WakeQos { notifiers: 1 + SPARE, listeners: 1 + SPARE };
+
+fn wake(
+    node: &Node<Ipc>,
+    name: &ServiceName,
+    qos: &WakeQos,
+) -> iceoryx2::service::builder::event::Builder<Ipc> {
+    node.service_builder(name)
+        .event()
+        .max_notifiers(qos.notifiers)
+        .max_listeners(qos.listeners)
+        .max_nodes(MAX_NODES)
+        // Only event id 0 is used ("look again"). A listener drains every possible id on each
+        // wake-up, and the default range of 256 ids showed up as 9% of the barrier's CPU.
+        .event_id_max_value(0)
+}
+
+/// Every service of one run, created by the world or opened by the others. Consumed by one of
+/// the `into_*` methods, which add the role's ports.
+pub struct RunServices {
+    pub(super) observations: publish_subscribe::PortFactory<Ipc, Observation, ()>,
+    pub(super) actions: publish_subscribe::PortFactory<Ipc, Action, ()>,
+    pub(super) episodes: publish_subscribe::PortFactory<Ipc, EpisodeReport, ()>,
+    pub(super) control: publish_subscribe::PortFactory<Ipc, Control, ()>,
+    pub(super) wake_world: event::PortFactory<Ipc>,
+    pub(super) wake_agents: event::PortFactory<Ipc>,
+    pub(super) wake_supervisor: event::PortFactory<Ipc>,
+    // After the services: iceoryx2 removes a service when its last node lets go of it.
+    pub(super) node: RunNode,
+    pub(super) run: RunConfig,
+}
+
+impl RunServices {
+    /// The world's constructor: creates every service of the run with its limits. Fails if a
+    /// live run already uses the run id.
+    pub fn create(run: &RunConfig) -> Result<RunServices, TransportError> {
+        let run_node = RunNode::new(run)?;
+        let node = run_node.node();
+        let id = &run.run_id;
+        let ps = |what: &str| service_name(id, what);
+        let obs_name = ps(OBSERVATIONS)?;
+        let act_name = ps(ACTIONS)?;
+        let epi_name = ps(EPISODES)?;
+        let ctl_name = ps(CONTROL)?;
+        let (ww, wa, wsup) = (ps(WAKE_WORLD)?, ps(WAKE_AGENTS)?, ps(WAKE_SUPERVISOR)?);
+        let created = |name: &ServiceName, e: ServiceFailure| e.into_error(run, name);
+        Ok(RunServices {
+            observations: pubsub::<Observation>(node, &obs_name, &OBSERVATIONS_QOS)
+                .create()
+                .map_err(|e| created(&obs_name, e.into()))?,
+            actions: pubsub::<Action>(node, &act_name, &ACTIONS_QOS)
+                .create()
+                .map_err(|e| created(&act_name, e.into()))?,
+            episodes: pubsub::<EpisodeReport>(node, &epi_name, &EPISODES_QOS)
+                .create()
+                .map_err(|e| created(&epi_name, e.into()))?,
+            control: pubsub::<Control>(node, &ctl_name, &CONTROL_QOS)
+                .create()
+                .map_err(|e| created(&ctl_name, e.into()))?,
+            wake_world: wake(node, &ww, &WAKE_WORLD_QOS)
+                .create()
+                .map_err(|e| created(&ww, e.into()))?,
+            wake_agents: wake(node, &wa, &WAKE_AGENTS_QOS)
+                .create()
+                .map_err(|e| created(&wa, e.into()))?,
+            wake_supervisor: wake(node, &wsup, &WAKE_SUPERVISOR_QOS)
+                .create()
+                .map_err(|e| created(&wsup, e.into()))?,
+            node: run_node,
+            run: run.clone(),
+        })
+    }
+
+    /// The agents' and the supervisor's constructor: opens every service, retrying while the
+    /// world has not created it yet, for at most `run.open_timeout` in all.
+    pub fn open(run: &RunConfig) -> Result<RunServices, TransportError> {
+        let run_node = RunNode::new(run)?;
+        let node = run_node.node();
+        let id = &run.run_id;
+        let deadline = Instant::now() + run.open_timeout;
+        let ps = |what: &str| service_name(id, what);
+        let (obs_name, act_name, epi_name, ctl_name) =
+            (ps(OBSERVATIONS)?, ps(ACTIONS)?, ps(EPISODES)?, ps(CONTROL)?);
+        let (ww, wa, wsup) = (ps(WAKE_WORLD)?, ps(WAKE_AGENTS)?, ps(WAKE_SUPERVISOR)?);
+        Ok(RunServices {
+            observations: retry(run, &obs_name, deadline, || {
+                pubsub::<Observation>(node, &obs_name, &OBSERVATIONS_QOS).open()
+            })?,
+            actions: retry(run, &act_name, deadline, || {
+                pubsub::<Action>(node, &act_name, &ACTIONS_QOS).open()
+            })?,
+            episodes: retry(run, &epi_name, deadline, || {
+                pubsub::<EpisodeReport>(node, &epi_name, &EPISODES_QOS).open()
+            })?,
+            control: retry(run, &ctl_name, deadline, || {
+                pubsub::<Control>(node, &ctl_name, &CONTROL_QOS).open()
+            })?,
+            wake_world: retry(run, &ww, deadline, || wake(node, &ww, &WAKE_WORLD_QOS).open())?,
+            wake_agents: retry(run, &wa, deadline, || wake(node, &wa, &WAKE_AGENTS_QOS).open())?,
+            wake_supervisor: retry(run, &wsup, deadline, || {
+                wake(node, &wsup, &WAKE_SUPERVISOR_QOS).open()
+            })?,
+            node: run_node,
+            run: run.clone(),
+        })
+    }
+
+    pub fn run_id(&self) -> &str {
+        &self.run.run_id
+    }
+
+    /// Removes the resources of dead nodes of this run (a crashed agent's ports). Returns how
+    /// many nodes were cleaned up.
+    pub fn cleanup_dead_nodes(&self) -> u64 {
+        self.node.node().try_cleanup_dead_nodes().cleanups
+    }
+}
+
+fn service_name(run_id: &str, what: &str) -> Result<ServiceName, TransportError> {
+    let name = services::service_name(run_id, what);
+    ServiceName::new(&name).map_err(|e| setup(run_id, format!("naming service `{name}`"), e))
+}
+
+/// A failed create or open of either kind of service, reduced to what decides the reaction:
+/// `DoesNotExist` on open is retried (the world has not created it yet), `AlreadyExists` on
+/// create means a live run holds the run id.
+struct ServiceFailure {
+    verb: &'static str,
+    missing: bool,
+    exists: bool,
+    source: Box<dyn std::error::Error + Send + Sync>,
+}
+
+impl ServiceFailure {
+    fn new(
+        verb: &'static str,
+        missing: bool,
+        exists: bool,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> ServiceFailure {
+        ServiceFailure { verb, missing, exists, source: Box::new(e) }
+    }
+
+    fn into_error(self, run: &RunConfig, name: &ServiceName) -> TransportError {
+        if self.exists {
+            return TransportError::RunInUse { run: run.run_id.clone(), service: name.to_string() };
+        }
+        TransportError::Setup {
+            run: run.run_id.clone(),
+            what: format!("{} service `{name}`", self.verb),
+            source: self.source,
+        }
+    }
+}
+
+impl From<PublishSubscribeOpenError> for ServiceFailure {
+    fn from(e: PublishSubscribeOpenError) -> ServiceFailure {
+        ServiceFailure::new("opening", e == PublishSubscribeOpenError::DoesNotExist, false, e)
+    }
+}
+
+impl From<EventOpenError> for ServiceFailure {
+    fn from(e: EventOpenError) -> ServiceFailure {
+        ServiceFailure::new("opening", e == EventOpenError::DoesNotExist, false, e)
+    }
+}
+
+impl From<PublishSubscribeCreateError> for ServiceFailure {
+    fn from(e: PublishSubscribeCreateError) -> ServiceFailure {
+        ServiceFailure::new("creating", false, e == PublishSubscribeCreateError::AlreadyExists, e)
+    }
+}
+
+impl From<EventCreateError> for ServiceFailure {
+    fn from(e: EventCreateError) -> ServiceFailure {
+        ServiceFailure::new("creating", false, e == EventCreateError::AlreadyExists, e)
+    }
+}
+
+fn retry<T, E: Into<ServiceFailure>>(
+    run: &RunConfig,
+    name: &ServiceName,
+    deadline: Instant,
+    mut open: impl FnMut() -> Result<T, E>,
+) -> Result<T, TransportError> {
+    loop {
+        let failure: ServiceFailure = match open() {
+            Ok(service) => return Ok(service),
+            Err(e) => e.into(),
+        };
+        if !failure.missing {
+            return Err(failure.into_error(run, name));
+        }
+        if Instant::now() >= deadline || termination_requested() {
+            return Err(TransportError::ServiceMissing {
+                run: run.run_id.clone(),
+                service: name.to_string(),
+                waited: run.open_timeout,
+            });
+        }
+        std::thread::sleep(OPEN_RETRY);
+    }
+}

@@ -1,0 +1,123 @@
+//! The barrier's waiting strategy. On 2 cores a run has more processes than cores, so a
+//! waiter that spins keeps the very peer it waits for off the CPU; one that blocks at once
+//! pays a kernel wake-up (an inter-processor interrupt, in a VM also an exit) every round.
+//! Polling with `yield_now` in between, then blocking, was measured best by
+//! `benches/barrier.rs`; `docs/TRANSPORT.md` has the numbers.
+
+use super::{termination_requested, Ipc, TransportError};
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use std::fmt::Display;
+use std::time::{Duration, Instant};
+
+/// The three phases of a wait, tuned on a 2-core machine by `benches/barrier.rs`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WaitPolicy {
+    /// Polls with only a CPU pause in between. Pays off only with more idle cores than
+    /// processes; on 2 cores it keeps the peer that would answer off the CPU.
+    pub spins: u32,
+    /// Polls with `yield_now` in between: hands the core to a peer that is ready to answer,
+    /// and costs a mere syscall when none is.
+    pub yields: u32,
+    /// Longest single block on the listener; bounds how late a missed wake-up or a deadline
+    /// can be noticed.
+    pub slice: Duration,
+}
+
+impl WaitPolicy {
+    /// Blocks on the event at once: the least CPU, the most wake-up latency.
+    pub const BLOCK: WaitPolicy =
+        WaitPolicy { spins: 0, yields: 0, slice: Duration::from_millis(10) };
+}
+
+impl Default for WaitPolicy {
+    /// Measured best on 2 cores with 2 and 8 agents: about 11 and 3 times the rounds/s of
+    /// blocking at once (more yields slow 8 agents down, fewer slow 2 agents down).
+    fn default() -> Self {
+        WaitPolicy { spins: 0, yields: 16, slice: Duration::from_millis(10) }
+    }
+}
+
+/// Waits on one wake-up event: spin, then yield, then block in slices, until `poll` has
+/// something or the deadline passes. Checks the SIGTERM latch on entry and after every block.
+pub struct Waiter {
+    listener: Listener<Ipc>,
+    policy: WaitPolicy,
+    run_id: String,
+    service: String,
+}
+
+impl Waiter {
+    pub(super) fn new(
+        listener: Listener<Ipc>,
+        policy: WaitPolicy,
+        run_id: &str,
+        service: &str,
+    ) -> Waiter {
+        Waiter { listener, policy, run_id: run_id.into(), service: service.into() }
+    }
+
+    /// Calls `poll` until it returns `Some`, for at most `timeout`. `what` names the awaited
+    /// thing in the error (pass `&format_args!(..)`: it is only formatted on failure).
+    ///
+    /// No wake-up is lost: the peer publishes before it notifies, and a notification that
+    /// arrives between a failed poll and the block stays pending, so the block returns at once.
+    pub fn wait<T>(
+        &self,
+        what: &dyn Display,
+        timeout: Duration,
+        mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
+    ) -> Result<T, TransportError> {
+        let start = Instant::now();
+        self.check_termination(what)?;
+        for _ in 0..self.policy.spins {
+            if let Some(found) = poll()? {
+                return Ok(found);
+            }
+            std::hint::spin_loop();
+        }
+        for _ in 0..self.policy.yields {
+            if let Some(found) = poll()? {
+                return Ok(found);
+            }
+            std::thread::yield_now();
+        }
+        loop {
+            if let Some(found) = poll()? {
+                return Ok(found);
+            }
+            let waited = start.elapsed();
+            if waited >= timeout {
+                return Err(TransportError::Timeout {
+                    run: self.run_id.clone(),
+                    service: self.service.clone(),
+                    what: what.to_string(),
+                    waited,
+                });
+            }
+            let slice = self.policy.slice.min(timeout - waited);
+            match self.listener.timed_wait(|_| {}, slice) {
+                // A signal cut the block short: re-check the latch, then poll again.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => {
+                    return Err(TransportError::Port {
+                        run: self.run_id.clone(),
+                        service: self.service.clone(),
+                        op: "waiting on the listener",
+                        source: Box::new(e),
+                    })
+                }
+            }
+            self.check_termination(what)?;
+        }
+    }
+
+    fn check_termination(&self, what: &dyn Display) -> Result<(), TransportError> {
+        if termination_requested() {
+            return Err(TransportError::Terminated {
+                run: self.run_id.clone(),
+                what: what.to_string(),
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,308 @@
+//! Tests of `flockstep_proto::transport` over real iceoryx2 services.
+//!
+//! Each test owns a run id (hence its own files in /dev/shm), so the tests run in parallel
+//! without meeting. Every wait is bounded and says what it waited for when it fails.
+
+use flockstep_proto::supervisor_to_world::Control;
+use flockstep_proto::transport::{
+    cleanup_run, leftover_files, sweep_stale_runs, RunConfig, RunServices, SignalMode,
+    TransportError,
+};
+use flockstep_proto::{Action, EpisodeReport, Observation};
+use std::io::BufRead;
+use std::time::Duration;
+
+const BOUND: Duration = Duration::from_secs(5);
+
+/// A run id unique to this test and this test process.
+fn run(test: &str) -> RunConfig {
+    let mut config =
+        RunConfig::new(format!("t-{test}-{}", std::process::id()), SignalMode::Untouched);
+    config.open_timeout = BOUND;
+    config
+}
+
+fn observation(round: u64) -> Box<Observation> {
+    Box::new(Observation { round, ..Observation::default() })
+}
+
+#[test]
+fn world_agent_and_supervisor_exchange_every_message() {
+    let config = run("roundtrip");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    world.wait_for_peers(1, true, BOUND).unwrap();
+
+    world.publish_observation(&observation(7)).unwrap();
+    let round = agent
+        .waiter()
+        .wait(&"observation of round 7", BOUND, || Ok(agent.try_observation()?.map(|o| o.round)))
+        .unwrap();
+    assert_eq!(round, 7);
+
+    agent.publish_action(&Action { round: 7, ..Action::new(3) }).unwrap();
+    let action = world.waiter().wait(&"action of round 7", BOUND, || world.try_action()).unwrap();
+    assert_eq!((action.round, action.agent), (7, 3));
+
+    world.publish_episode(&EpisodeReport { episode: 11, ..EpisodeReport::default() }).unwrap();
+    let report =
+        supervisor.waiter().wait(&"episode 11", BOUND, || supervisor.try_episode()).unwrap();
+    assert_eq!(report.episode, 11);
+
+    supervisor.send_control(&Control { stop: 1, ..Control::default() }).unwrap();
+    let control = world.waiter().wait(&"stop command", BOUND, || world.try_control()).unwrap();
+    assert_eq!(control.stop, 1);
+}
+
+#[test]
+fn open_waits_until_the_world_has_created_the_services() {
+    let config = run("openwait");
+    let opener = {
+        let config = config.clone();
+        // The ports are not Send: the thread opens, checks and drops them itself.
+        std::thread::spawn(move || RunServices::open(&config).map(|s| s.run_id().to_string()))
+    };
+    std::thread::sleep(Duration::from_millis(100));
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let opened = opener.join().expect("opener thread panicked");
+    assert_eq!(opened.unwrap(), config.run_id);
+}
+
+#[test]
+fn open_without_a_world_times_out_naming_the_service() {
+    let mut config = run("nowrld");
+    config.open_timeout = Duration::from_millis(50);
+    let error = RunServices::open(&config).err().expect("open must fail without a world");
+    let text = error.to_string();
+    assert!(matches!(error, TransportError::ServiceMissing { .. }), "{text}");
+    assert!(text.contains("observations") && text.contains(&config.run_id), "{text}");
+}
+
+#[test]
+fn a_second_world_for_the_same_run_is_refused() {
+    let config = run("twice");
+    let _first = RunServices::create(&config).unwrap();
+    let error = RunServices::create(&config).err().expect("second create must fail");
+    assert!(matches!(error, TransportError::RunInUse { .. }), "{error}");
+}
+
+#[test]
+fn bad_run_ids_are_errors_not_panics() {
+    for bad in ["", "a/b", "a.b", &"x".repeat(41)] {
+        let error = RunServices::create(&RunConfig::new(bad, SignalMode::Untouched)).err();
+        assert!(
+            matches!(error, Some(TransportError::InvalidRunId(_))),
+            "run id {bad:?}: {error:?}"
+        );
+    }
+}
+
+#[test]
+fn a_late_agent_gets_the_current_round_from_history() {
+    let config = run("history");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    world.publish_observation(&observation(3)).unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    // History reaches a new subscriber when the publisher updates its connections.
+    world.serve_late_joiners().unwrap();
+    let round = agent
+        .waiter()
+        .wait(&"round 3 from history", BOUND, || Ok(agent.try_observation()?.map(|o| o.round)))
+        .unwrap();
+    assert_eq!(round, 3);
+}
+
+#[test]
+fn a_wait_that_times_out_says_what_it_waited_for() {
+    let config = run("timeout");
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let error = agent
+        .waiter()
+        .wait(&format_args!("observation of round {}", 42), Duration::from_millis(30), || {
+            Ok(agent.try_observation()?.map(|o| o.round))
+        })
+        .unwrap_err();
+    let text = error.to_string();
+    assert!(matches!(error, TransportError::Timeout { .. }), "{text}");
+    assert!(text.contains("round 42") && text.contains("wake/agents"), "{text}");
+}
+
+#[test]
+fn nothing_of_a_run_is_left_after_every_process_dropped_its_ports() {
+    let config = run("clean");
+    {
+        let world = RunServices::create(&config).unwrap().into_world().unwrap();
+        let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+        let _supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+        world.publish_observation(&observation(1)).unwrap();
+        agent.publish_action(&Action::new(0)).unwrap();
+        let during = leftover_files(&config.run_id).unwrap();
+        assert!(
+            during.iter().any(|p| p.starts_with("/dev/shm")),
+            "no shm files while running: {during:?}"
+        );
+    }
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind: {after:#?}");
+}
+
+/// Not a test of its own: the body of the child processes that `spawn_and_kill` starts.
+#[test]
+#[ignore = "child process of the tests that kill a process"]
+fn child_process() {
+    let (Ok(run_id), Ok(role)) =
+        (std::env::var("FLOCKSTEP_TEST_CHILD_RUN"), std::env::var("FLOCKSTEP_TEST_CHILD_ROLE"))
+    else {
+        return;
+    };
+    let parent: u32 = std::env::var("FLOCKSTEP_TEST_PARENT").unwrap().parse().unwrap();
+    flockstep_proto::transport::exit_with_parent(parent).unwrap();
+    let signals =
+        if role == "supervised-agent" { SignalMode::Supervised } else { SignalMode::Untouched };
+    let mut config = RunConfig::new(run_id, signals);
+    config.open_timeout = BOUND;
+    if role == "world" {
+        let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+        println!("child-ready");
+        std::thread::sleep(Duration::from_secs(60));
+        return;
+    }
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    println!("child-ready");
+    if role == "supervised-agent" {
+        let waited = agent.waiter().wait(
+            &"an observation that never comes",
+            Duration::from_secs(60),
+            || Ok(agent.try_observation()?.map(|o| o.round)),
+        );
+        println!("child-result {waited:?}");
+        return;
+    }
+    std::thread::sleep(Duration::from_secs(60));
+}
+
+/// Starts `child_process` in `role` and waits until its ports exist; returns it with the
+/// rest of its stdout and what it printed so far.
+fn spawn_child(
+    config: &RunConfig,
+    role: &str,
+) -> (std::process::Child, std::io::Lines<std::io::BufReader<std::process::ChildStdout>>, String) {
+    let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "child_process", "--ignored", "--nocapture", "--test-threads=1"])
+        .env("FLOCKSTEP_TEST_CHILD_RUN", &config.run_id)
+        .env("FLOCKSTEP_TEST_CHILD_ROLE", role)
+        .env("FLOCKSTEP_TEST_PARENT", std::process::id().to_string())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Bounded: the child prints the line within BOUND or exits (panicking), ending the stream.
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut seen = String::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        seen.push_str(&line);
+        seen.push('\n');
+        if line.contains("child-ready") {
+            return (child, lines, seen);
+        }
+    }
+    let status = child.wait().unwrap();
+    panic!("{role} child exited ({status}) before getting ready; stdout:\n{seen}");
+}
+
+/// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.
+fn spawn_and_kill(config: &RunConfig, role: &str) {
+    let (mut child, _, _) = spawn_child(config, role);
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+#[test]
+fn sigterm_makes_a_supervised_agent_leave_its_wait_cleanly() {
+    let config = run("sigterm");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let (mut child, lines, mut seen) = spawn_child(&config, "supervised-agent");
+    // Give it time to block in its wait; SIGTERM must cut the block short either way.
+    std::thread::sleep(Duration::from_millis(50));
+    // SAFETY: signalling our own child by pid.
+    assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) }, 0);
+    // Bounded: the child's wait ends on SIGTERM at the latest after one slice, or it exits.
+    for line in lines {
+        seen.push_str(&line.unwrap());
+        seen.push('\n');
+    }
+    let status = child.wait().unwrap();
+    assert!(status.success(), "child {status}; stdout:\n{seen}");
+    assert!(seen.contains("child-result Err(Terminated"), "stdout:\n{seen}");
+    // It dropped its ports itself: nothing to clean.
+    assert_eq!(world.peers().observation_subscribers, 0, "stdout:\n{seen}");
+    assert_eq!(world.services().cleanup_dead_nodes(), 0);
+}
+
+#[test]
+fn a_killed_world_is_swept() {
+    let config = run("killed");
+    spawn_and_kill(&config, "world");
+    assert!(
+        !leftover_files(&config.run_id).unwrap().is_empty(),
+        "a SIGKILL must leave files behind"
+    );
+
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+    let sweep = sweep_stale_runs().unwrap();
+    assert!(!sweep.live_runs.contains(&config.run_id), "{sweep:?}");
+}
+
+#[test]
+fn the_world_removes_a_killed_agent() {
+    let config = run("deadagent");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    spawn_and_kill(&config, "agent");
+    assert_eq!(
+        world.peers().observation_subscribers,
+        1,
+        "the dead agent's ports stay until cleaned"
+    );
+    assert_eq!(world.services().cleanup_dead_nodes(), 1);
+    let peers = world.peers();
+    assert_eq!(
+        (peers.observation_subscribers, peers.action_publishers, peers.agent_listeners),
+        (0, 0, 0)
+    );
+}
+
+#[test]
+fn episode_records_outlive_the_world_that_sent_them() {
+    let config = run("outlive");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    let sent = flockstep_proto::transport::EPISODE_BUFFER as u64;
+    for episode in 0..sent {
+        world.publish_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
+    }
+    drop(world);
+    let mut received = Vec::new();
+    while let Some(report) = supervisor.try_episode().unwrap() {
+        received.push(report.episode);
+    }
+    assert_eq!(received, (0..sent).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_full_episode_buffer_fails_after_the_report_timeout_instead_of_dropping() {
+    let mut config = run("stalled");
+    config.report_timeout = Duration::from_millis(50);
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let _idle_supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    let report = EpisodeReport::default();
+    for _ in 0..flockstep_proto::transport::EPISODE_BUFFER {
+        world.publish_episode(&report).unwrap();
+    }
+    let error = world.publish_episode(&report).unwrap_err();
+    assert!(matches!(error, TransportError::ReportsStalled { .. }), "{error}");
+}

@@ -1,0 +1,112 @@
+//! The supervisor's child processes: spawned with explicit arguments in their own process
+//! group (a terminal's Ctrl-C reaches only the supervisor, which stops the run in order),
+//! with their stderr in a log file, and shut down by a ladder: wait, SIGTERM, SIGKILL.
+
+use anyhow::{Context, Result};
+use std::fs::File;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// One child process.
+pub struct Process {
+    pub name: String,
+    child: Child,
+    log: PathBuf,
+    status: Option<ExitStatus>,
+}
+
+impl Process {
+    /// Spawns `command` as `name`, its stdout and stderr going to `log`.
+    pub fn spawn(name: &str, mut command: Command, log: &Path) -> Result<Process> {
+        let file =
+            File::create(log).with_context(|| format!("cannot create log {}", log.display()))?;
+        command
+            .stdin(Stdio::null())
+            .stdout(
+                file.try_clone().with_context(|| format!("cannot share log {}", log.display()))?,
+            )
+            .stderr(file)
+            .process_group(0);
+        let child = command
+            .spawn()
+            .with_context(|| format!("cannot start {name} ({:?})", command.get_program()))?;
+        Ok(Process { name: name.to_string(), child, log: log.to_path_buf(), status: None })
+    }
+
+    /// The exit status, once the process has exited.
+    pub fn status(&mut self) -> Result<Option<ExitStatus>> {
+        if self.status.is_none() {
+            self.status =
+                self.child.try_wait().with_context(|| format!("cannot watch {}", self.name))?;
+        }
+        Ok(self.status)
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// The last error line the process logged (or its last line), for error messages.
+    pub fn last_words(&self) -> String {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+        lines.iter().rev().find(|l| l.contains("error")).or(lines.last()).map_or_else(
+            || format!("no output; see {}", self.log.display()),
+            |l| l.trim().to_string(),
+        )
+    }
+
+    fn signal(&self, signal: libc::c_int) {
+        if self.status.is_none() {
+            // SAFETY: kill(2) on our own child's pid; a failure (already gone) is harmless.
+            unsafe {
+                libc::kill(self.child.id() as libc::pid_t, signal);
+            }
+        }
+    }
+}
+
+/// Waits until every process has exited, for at most `grace`. True if all did.
+fn wait_all(processes: &mut [Process], grace: Duration) -> Result<bool> {
+    let deadline = Instant::now() + grace;
+    loop {
+        let mut running = 0;
+        for p in processes.iter_mut() {
+            if p.status()?.is_none() {
+                running += 1;
+            }
+        }
+        if running == 0 {
+            return Ok(true);
+        }
+        if Instant::now() >= deadline {
+            return Ok(false);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// The shutdown ladder: let them leave for `grace`, then SIGTERM and wait 2 s, then SIGKILL
+/// and wait until they are gone. Returns the names of those that had to be signalled.
+pub fn shut_down(processes: &mut [Process], grace: Duration) -> Result<Vec<String>> {
+    let mut forced = Vec::new();
+    if wait_all(processes, grace)? {
+        return Ok(forced);
+    }
+    for p in processes.iter_mut() {
+        if p.status()?.is_none() {
+            forced.push(p.name.clone());
+            p.signal(libc::SIGTERM);
+        }
+    }
+    if wait_all(processes, Duration::from_secs(2))? {
+        return Ok(forced);
+    }
+    for p in processes.iter_mut() {
+        p.signal(libc::SIGKILL);
+    }
+    wait_all(processes, Duration::from_secs(10))?;
+    Ok(forced)
+}

@@ -1,0 +1,46 @@
+//! `agent bt show` and `agent bt replay` (issue 2): the formats the README documents.
+
+use crate::harness::{repo_file, run_fail, run_ok, AGENT};
+
+fn stdout(args: &[&str]) -> String {
+    String::from_utf8(run_ok(AGENT, args).stdout).expect("UTF-8 output")
+}
+
+#[test]
+fn show_draws_the_fig5_tree() {
+    let tree = repo_file("agents/trees/fig5.bt");
+    let drawn = stdout(&["bt", "show", tree.to_str().expect("a UTF-8 path")]);
+    let expected = " 1  OR\n 2  ├── AND\n 3  │   ├── C-seeTarget\n 4  │   └── A-endEpisode\n 5  └── LOR\n 6      ├── A-rotate\n 7      ├── A-elevate\n 8      ├── A-rotate\n 9      ├── A-deElevate\n10      └── A-waypointTranslation\n";
+    assert_eq!(drawn, expected);
+}
+
+#[test]
+fn replay_reports_root_status_ticked_and_halted_leaves() {
+    let tree = repo_file("tests/data/show_replay.bt");
+    let script = repo_file("tests/data/show_replay.script");
+    let report =
+        stdout(&["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")]);
+    let expected = "\
+tick 1: RUNNING  ticked C-done@3=FAILURE A-climb@6=RUNNING  halted -
+tick 2: RUNNING  ticked C-done@3=FAILURE A-climb@6=SUCCESS A-scan@7=RUNNING  halted -
+tick 3: SUCCESS  ticked C-done@3=SUCCESS A-report@4=SUCCESS  halted A-scan@7
+";
+    assert_eq!(report, expected);
+}
+
+#[test]
+fn replay_names_the_script_line_of_a_missing_result() {
+    let dir = crate::harness::scratch();
+    let script = dir.path().join("short.script");
+    std::fs::write(&script, "done=F\n").expect("write the script");
+    let tree = repo_file("tests/data/show_replay.bt");
+    let (out, report) = run_fail(
+        AGENT,
+        &["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("short.script:1:") && stderr.contains("A-climb was ticked"),
+        "{report}"
+    );
+}

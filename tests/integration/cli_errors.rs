@@ -1,0 +1,78 @@
+//! Bad input (issue 3, acceptance 6): an unknown scenario, an unreadable tree, `--uavs 0`,
+//! more UAVs than routes, a results directory that cannot be written. Each gives one clear
+//! error line naming the problem and a non-zero exit, for both transports.
+
+use crate::harness::{run_fail, scratch, SUPERVISOR};
+
+/// Runs the supervisor expecting failure; returns its stderr, checked to be one line.
+fn error_line(args: &[&str]) -> String {
+    let (out, report) = run_fail(SUPERVISOR, args);
+    let stderr = String::from_utf8_lossy(&out.stderr).trim().to_string();
+    assert_eq!(stderr.lines().count(), 1, "expected one error line\n{report}");
+    assert!(stderr.starts_with("supervisor: error: "), "{report}");
+    assert_eq!(out.status.code(), Some(1), "{report}");
+    stderr
+}
+
+fn for_both_transports(args: &[&str], expected: &[&str]) {
+    let dir = scratch();
+    let out = dir.path().join("out").display().to_string();
+    for transport in ["inproc", "shm"] {
+        let mut all = args.to_vec();
+        all.extend(["--transport", transport, "--out", &out, "--episodes", "10", "--quiet"]);
+        let line = error_line(&all);
+        for word in expected {
+            assert!(line.contains(word), "`{line}` should mention `{word}` ({transport})");
+        }
+    }
+}
+
+#[test]
+fn unknown_scenario() {
+    for_both_transports(&["--scenario", "s9"], &["s9"]);
+}
+
+#[test]
+fn unreadable_tree() {
+    for_both_transports(
+        &["--bt", "/nonexistent/tree.bt"],
+        &["cannot read tree file", "/nonexistent/tree.bt"],
+    );
+}
+
+#[test]
+fn malformed_tree_names_file_line_and_column() {
+    let dir = scratch();
+    let tree = dir.path().join("bad.bt");
+    std::fs::write(&tree, "OR 2\n- A-fly 0\n- A-rotate 0\n").expect("write the tree");
+    let tree = tree.display().to_string();
+    for_both_transports(&["--bt", &tree], &[&format!("{tree}:2:3:"), "unknown action `fly`"]);
+}
+
+#[test]
+fn zero_uavs() {
+    for_both_transports(&["--uavs", "0"], &["--uavs must be at least 1"]);
+}
+
+#[test]
+fn more_uavs_than_routes() {
+    for_both_transports(&["--uavs", "3", "--scenario", "s3"], &["--uavs 3", "2 route"]);
+}
+
+#[test]
+fn more_uavs_than_supported() {
+    for_both_transports(&["--uavs", "65"], &["--uavs 65", "64"]);
+}
+
+#[test]
+fn results_directory_that_cannot_be_written() {
+    let dir = scratch();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, b"").expect("write a file");
+    let out = file.join("results").display().to_string();
+    for transport in ["inproc", "shm"] {
+        let line =
+            error_line(&["--transport", transport, "--out", &out, "--episodes", "10", "--quiet"]);
+        assert!(line.contains("results directory") && line.contains(&out), "{line}");
+    }
+}

@@ -1,0 +1,13 @@
+//! Integration tests: the real binaries, spawned as a user would run them.
+//! Every test uses its own results directory and run id, so they run in parallel.
+
+/// `agent bt show` and `agent bt replay`.
+mod bt_tools;
+/// Bad flags and files: one clear line, a non-zero exit, nothing left behind.
+mod cli_errors;
+/// Same seed, same bytes; another seed, other bytes.
+mod determinism;
+/// Spawns binaries and reports failures with the command, status, stdout and stderr.
+mod harness;
+/// The thesis's learning results in-process: optima reached, communication helps.
+mod learning;
