@@ -243,6 +243,11 @@ impl TrialAgent {
         &mut self.tree
     }
 
+    /// What this agent knows of the others now.
+    pub fn comm(&self) -> &CommState {
+        &self.comm
+    }
+
     pub fn states(&self) -> &StateSpace {
         &self.states
     }

@@ -11,6 +11,7 @@ pub mod learning;
 pub mod node;
 pub mod snapshot;
 pub mod state;
+pub mod trace;
 pub mod uav;
 
 /// The thesis's tree (Fig. 5), the default of every run.

@@ -11,6 +11,7 @@ use crate::bt::render::to_text;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
 use crate::snapshot::write_snapshots;
+use crate::trace::Trace;
 use crate::uav::UavCatalog;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -57,6 +58,9 @@ pub struct NodeArgs {
     /// Exit when this process (the supervisor) is gone.
     #[arg(long)]
     pub parent_pid: Option<u32>,
+    /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
 }
 
 pub fn run(args: &NodeArgs) -> Result<()> {
@@ -96,6 +100,7 @@ pub fn run(args: &NodeArgs) -> Result<()> {
     let ports = RunServices::open(&run)?.into_agent()?;
     let mut action = Box::new(Action::new(slot));
     let world_timeout = Duration::from_millis(args.world_timeout_ms);
+    let mut trace = args.trace.as_deref().map(Trace::create).transpose()?;
     let mut next_round = 0u64;
     loop {
         let observation = ports.waiter().wait(
@@ -117,6 +122,9 @@ pub fn run(args: &NodeArgs) -> Result<()> {
         agent
             .act(&observation, &mut action)
             .with_context(|| format!("round {}", observation.round))?;
+        if let Some(trace) = trace.as_mut() {
+            trace.record(&observation, &action, &agent)?;
+        }
         if observation.kind == ObservationKind::Stop as u8 {
             write_snapshots(&agent, &args.out, scenario.name(), comm, &tree_text)?;
             ports.publish_action(&action)?;

@@ -99,4 +99,7 @@ pub struct RunArgs {
     /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long)]
     pub quiet: bool,
+    /// Test aid (shm only): each agent writes a per-round trace `uav<N>.trace.csv` here.
+    #[arg(long, hide = true)]
+    pub trace_dir: Option<PathBuf>,
 }

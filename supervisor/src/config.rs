@@ -35,6 +35,7 @@ pub struct RunConfig {
     pub transport: Transport,
     pub run_id: String,
     pub quiet: bool,
+    pub trace_dir: Option<PathBuf>,
 }
 
 impl RunConfig {
@@ -107,6 +108,7 @@ impl RunConfig {
             transport: args.transport,
             run_id,
             quiet: args.quiet,
+            trace_dir: args.trace_dir.clone(),
         })
     }
 

@@ -98,6 +98,9 @@ fn agent_command(config: &RunConfig, slot: usize) -> Result<Command> {
     if let Some(bt) = &config.bt_path {
         command.arg("--bt").arg(bt);
     }
+    if let Some(dir) = &config.trace_dir {
+        command.arg("--trace").arg(dir.join(format!("uav{}.trace.csv", slot + 1)));
+    }
     Ok(command)
 }
 

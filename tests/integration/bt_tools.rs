@@ -1,4 +1,5 @@
 //! `agent bt show` and `agent bt replay` (issue 2): the formats the README documents.
+//! Nodes are named `kind@line`, the line in the tree file (comments count).
 
 use crate::harness::{repo_file, run_fail, run_ok, AGENT};
 
@@ -21,9 +22,9 @@ fn replay_reports_root_status_ticked_and_halted_leaves() {
     let report =
         stdout(&["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")]);
     let expected = "\
-tick 1: RUNNING  ticked C-done@3=FAILURE A-climb@6=RUNNING  halted -
-tick 2: RUNNING  ticked C-done@3=FAILURE A-climb@6=SUCCESS A-scan@7=RUNNING  halted -
-tick 3: SUCCESS  ticked C-done@3=SUCCESS A-report@4=SUCCESS  halted A-scan@7
+tick 1: RUNNING  ticked C-done@4=FAILURE A-climb@7=RUNNING  halted -
+tick 2: RUNNING  ticked C-done@4=FAILURE A-climb@7=SUCCESS A-scan@8=RUNNING  halted -
+tick 3: SUCCESS  ticked C-done@4=SUCCESS A-report@5=SUCCESS  halted A-scan@8
 ";
     assert_eq!(report, expected);
 }

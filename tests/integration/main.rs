@@ -11,3 +11,5 @@ mod determinism;
 mod harness;
 /// The thesis's learning results in-process: optima reached, communication helps.
 mod learning;
+/// Real world and agent processes: equivalence, lockstep, isolation, clean shutdown.
+mod shm;

@@ -30,8 +30,8 @@ impl WaitPolicy {
 }
 
 impl Default for WaitPolicy {
-    /// Measured best on 2 cores with 2 and 8 agents: about 11 and 3 times the rounds/s of
-    /// blocking at once (more yields slow 8 agents down, fewer slow 2 agents down).
+    /// Measured best on 2 cores with 2 and 8 agents: 7 to 13 and about 3 times the rounds/s
+    /// of blocking at once (more yields slow 8 agents down, fewer slow 2 agents down).
     fn default() -> Self {
         WaitPolicy { spins: 0, yields: 16, slice: Duration::from_millis(10) }
     }
