@@ -28,6 +28,23 @@ pub enum Command {
         #[arg(long, default_value = "s2")]
         scenario: String,
     },
+    /// Reproduce a figure of the thesis: run its experiments (multi-process by default) and
+    /// plot them. fig10: s1, one UAV. fig11: s2 without vs s3 with communication.
+    Reproduce {
+        #[arg(value_enum)]
+        figure: Figure,
+        /// Directory for the runs and the plot [default: results/<figure>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long, default_value_t = 50_000)]
+        episodes: u64,
+        #[arg(long, default_value_t = 4)]
+        trials: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, value_enum, default_value_t = Transport::Shm)]
+        transport: Transport,
+    },
     /// Draw several learning curves (curve.csv files) on one plot, e.g. the thesis's Fig. 11.
     Plot {
         /// `PATH/curve.csv=LABEL`; repeat for each curve. Agent 1's curve is drawn.
@@ -39,6 +56,15 @@ pub enum Command {
         #[arg(long, default_value = "Episode length vs iterations")]
         title: String,
     },
+}
+
+/// A figure of the thesis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Figure {
+    /// Learning curve of one UAV, one target (scenario 1).
+    Fig10,
+    /// One UAV without vs two UAVs with communication, two candidate targets (s2 vs s3).
+    Fig11,
 }
 
 /// How the world and agents talk.

@@ -8,6 +8,7 @@ pub mod curve;
 pub mod inproc;
 pub mod plot;
 pub mod recorder;
+pub mod reproduce;
 pub mod results;
 pub mod run;
 pub mod shm;
@@ -47,11 +48,15 @@ fn dispatch(cli: Cli) -> Result<u8> {
         Some(Command::Plot { curves, out, title }) => {
             commands::plot(&curves, &out, &title).map(|()| 0)
         }
+        Some(Command::Reproduce { figure, out, episodes, trials, seed, transport }) => {
+            let stop = stop_on_ctrl_c()?;
+            let base = cli::RunArgs { episodes, trials, seed, transport, ..cli.run };
+            let complete = reproduce::reproduce(figure, out, &base, &stop)?;
+            Ok(if complete { 0 } else { EXIT_INTERRUPTED as u8 })
+        }
         None => {
             let config = config::RunConfig::resolve(&cli.run)?;
-            let stop = Arc::new(AtomicBool::new(false));
-            let flag = stop.clone();
-            ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))?;
+            let stop = stop_on_ctrl_c()?;
             let outcome = run::run_experiment(&config, &stop)?;
             for note in &outcome.notes {
                 eprintln!("supervisor: {note}");
@@ -60,6 +65,15 @@ fn dispatch(cli: Cli) -> Result<u8> {
             Ok(if outcome.complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
     }
+}
+
+/// Ctrl-C (and SIGTERM) set the returned flag: the run stops at the end of a round and
+/// writes what it has.
+fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))?;
+    Ok(stop)
 }
 
 mod commands;
