@@ -14,8 +14,7 @@ use crate::learning::{LearnParams, StateId};
 use crate::state::StateSpace;
 use crate::uav::Body;
 use flockstep_proto::{
-    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_AGENTS,
-    MAX_TRIALS,
+    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_TRIALS,
 };
 use flockstep_world::scenario::Scenario;
 use rand::SeedableRng;
@@ -101,6 +100,8 @@ pub struct TrialAgent {
     finished: bool,
     /// Training episodes closed so far.
     trained_episodes: u64,
+    /// Peers taking part in this trial when last observed (departures void what was heard).
+    peers: u64,
 }
 
 impl TrialAgent {
@@ -122,6 +123,7 @@ impl TrialAgent {
             open: None,
             finished: false,
             trained_episodes: 0,
+            peers: 0,
         })
     }
 
@@ -136,7 +138,8 @@ impl TrialAgent {
         let view = &obs.agents[self.slot];
         view.pose.validate(self.route_len)?;
         flockstep_proto::check_below("observation.phase", obs.phase.into(), 2)?;
-        if obs.done != 0 {
+        self.forget_departed(obs, live);
+        if obs.done != 0 || view.member == 0 {
             self.close_episode(obs, live)?;
             return Ok(());
         }
@@ -174,12 +177,19 @@ impl TrialAgent {
         Ok(())
     }
 
+    /// What was heard from a peer that no longer takes part in this trial is void.
+    fn forget_departed(&mut self, obs: &TrialObservation, live: u64) {
+        let peers = obs.members & live & !(1 << self.slot);
+        for peer in bits(self.peers & !peers) {
+            self.comm.forget(peer);
+        }
+        self.peers = peers;
+    }
+
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
     fn hear(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
-        for peer in 0..MAX_AGENTS {
-            if peer != self.slot && live & (1 << peer) != 0 {
-                self.comm.hear(peer, &obs.agents[peer].flags)?;
-            }
+        for peer in bits(obs.members & live & !(1 << self.slot)) {
+            self.comm.hear(peer, &obs.agents[peer].flags)?;
         }
         Ok(())
     }
@@ -255,6 +265,17 @@ impl TrialAgent {
     pub fn set_states(&mut self, states: StateSpace) {
         self.states = states;
     }
+}
+
+/// The indices of the bits set in `mask`, lowest first.
+fn bits(mut mask: u64) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let bit = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            bit
+        })
+    })
 }
 
 /// One UAV agent: one [`TrialAgent`] per trial.

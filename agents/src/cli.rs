@@ -14,9 +14,16 @@ use std::path::PathBuf;
     version,
     about = "A flockstep UAV agent, and tools to inspect behavior trees"
 )]
+#[command(args_conflicts_with_subcommands = true)]
 struct Cli {
+    /// Attach to the running simulation RUN_ID: the world admits this agent on a free route
+    /// at the next episode start of each trial.
+    #[arg(long, value_name = "RUN_ID")]
+    attach: Option<String>,
+    #[command(flatten)]
+    attach_args: crate::node::AttachArgs,
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -53,13 +60,19 @@ pub fn main() -> std::process::ExitCode {
                 .unwrap_or_else(|_| "warn".into()),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
-    let result = match Cli::parse().command {
-        Command::Bt { command: BtCommand::Show { tree } } => show(&tree),
-        Command::Bt { command: BtCommand::Replay { tree, script, seed } } => {
+    let cli = Cli::parse();
+    let result = match (cli.command, cli.attach) {
+        (Some(Command::Bt { command: BtCommand::Show { tree } }), _) => show(&tree),
+        (Some(Command::Bt { command: BtCommand::Replay { tree, script, seed } }), _) => {
             replay_files(&tree, &script, seed)
         }
-        Command::Run(args) => crate::node::run(&args),
+        (Some(Command::Run(args)), _) => crate::node::run(&args),
+        (None, Some(run_id)) => crate::node::attach(&run_id, &cli.attach_args),
+        (None, None) => {
+            Err(anyhow::anyhow!("nothing to do: give --attach RUN_ID or a subcommand (see --help)"))
+        }
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,26 +1,66 @@
-//! The agent process (`agent run`): one UAV of a multi-process run.
+//! The agent process: one UAV of a multi-process run, started by the supervisor
+//! (`agent run`) or attached to a running simulation (`agent --attach RUN_ID`).
 //!
-//! Each round it reads the world's observation in place in shared memory, ticks its tree
-//! for every trial through [`UavAgent::act`] (the very code the in-process runner calls) and
-//! publishes its action. On the stop round it closes its episodes, writes its Q-table
-//! snapshots and answers once more, so the world knows they are on disk.
+//! It asks the world for a slot, then each round reads the world's observation in place in
+//! shared memory, ticks its tree for every trial through [`UavAgent::act`] (the very code the
+//! in-process runner calls) and publishes its action. Every `--snapshot-every` training
+//! episodes it saves its Q-tables, so a restarted agent can go on from them (`--resume`). On
+//! the stop round it closes its episodes, writes its snapshots and answers once more, so the
+//! world knows they are on disk. `docs/MEMBERSHIP.md` describes the protocol.
 
 use crate::agent::{AgentSpec, UavAgent};
 use crate::bt::parse::parse_tree;
 use crate::bt::render::to_text;
+use crate::bt::spec::TreeSpec;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
-use crate::snapshot::write_snapshots;
+use crate::snapshot::{snapshot_path, write_snapshot, write_snapshots, Snapshot};
 use crate::trace::Trace;
 use crate::uav::UavCatalog;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
-use flockstep_proto::transport::{exit_with_parent, RunConfig, RunServices, SignalMode};
-use flockstep_proto::{Action, ObservationKind};
+use flockstep_proto::transport::{
+    exit_with_parent, termination_requested, AgentPorts, ObservationSample, RunConfig, RunServices,
+    SignalMode, TransportError,
+};
+use flockstep_proto::{Action, JoinRequest, ObservationKind, RunInfo, ANY_SLOT};
 use flockstep_world::Scenario;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
+
+/// Tree and learning options shared by `agent run` and `agent --attach`.
+#[derive(Debug, Clone, Args)]
+pub struct LearnerArgs {
+    /// Behavior tree file [default: the thesis's Fig. 5 tree].
+    #[arg(long)]
+    pub bt: Option<PathBuf>,
+    /// Learning rate [default: the run's].
+    #[arg(long)]
+    pub alpha: Option<f64>,
+    /// Discount [default: the run's].
+    #[arg(long)]
+    pub gamma: Option<f64>,
+    /// Exploration [default: the run's].
+    #[arg(long)]
+    pub epsilon: Option<f64>,
+    /// Start from the Q-table snapshots in `<DIR>/qtables/` (those of this agent's slot).
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Save this agent's Q-tables every N training episodes of a trial (0: only at the end).
+    #[arg(long, default_value_t = 0)]
+    pub snapshot_every: u64,
+    /// The world silent this long is presumed dead.
+    #[arg(long, default_value_t = 30_000)]
+    pub world_timeout_ms: u64,
+    /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
+    /// Test aid, off by default: `crash-at-round=N` (abort), `hang-at-round=N` (stop
+    /// answering, still obey SIGTERM), `ignore-sigterm`.
+    #[arg(long)]
+    pub fault: Option<String>,
+}
 
 /// Arguments of `agent run` (the supervisor passes them all explicitly).
 #[derive(Debug, Clone, Args)]
@@ -30,7 +70,7 @@ pub struct NodeArgs {
     /// Agent slot, 1-based (UAV1 flies route 1).
     #[arg(long)]
     pub uav: usize,
-    /// s1, s2, s3 or a path to a .map file.
+    /// s1, s2, s3, gen:... or a path to a .map file.
     #[arg(long)]
     pub scenario: String,
     #[arg(long)]
@@ -40,96 +80,317 @@ pub struct NodeArgs {
     /// none or flags.
     #[arg(long)]
     pub comm: String,
-    /// Behavior tree file [default: the thesis's Fig. 5 tree].
-    #[arg(long)]
-    pub bt: Option<PathBuf>,
-    #[arg(long)]
-    pub alpha: f64,
-    #[arg(long)]
-    pub gamma: f64,
-    #[arg(long)]
-    pub epsilon: f64,
     /// Results directory: snapshots go to `<out>/qtables/`.
     #[arg(long)]
     pub out: PathBuf,
-    /// The world silent this long is presumed dead.
-    #[arg(long, default_value_t = 30_000)]
-    pub world_timeout_ms: u64,
     /// Exit when this process (the supervisor) is gone.
     #[arg(long)]
     pub parent_pid: Option<u32>,
-    /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
-    #[arg(long)]
-    pub trace: Option<PathBuf>,
+    #[command(flatten)]
+    pub learner: LearnerArgs,
 }
 
+/// Arguments of `agent --attach RUN_ID`: the run tells the rest.
+#[derive(Debug, Clone, Args)]
+pub struct AttachArgs {
+    /// Results directory for this agent's snapshots [default: results/<run-id>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Ask for this slot (1-based) if its route is free [default: any free route].
+    #[arg(long)]
+    pub uav: Option<usize>,
+    #[command(flatten)]
+    pub learner: LearnerArgs,
+}
+
+/// A test aid that makes the agent misbehave on purpose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fault {
+    CrashAtRound(u64),
+    HangAtRound(u64),
+    IgnoreSigterm,
+}
+
+fn parse_fault(spec: &str) -> Result<Fault> {
+    let round = |value: &str| {
+        value
+            .parse::<u64>()
+            .with_context(|| format!("--fault `{spec}`: `{value}` is not a round number"))
+    };
+    match spec.split_once('=') {
+        Some(("crash-at-round", n)) => Ok(Fault::CrashAtRound(round(n)?)),
+        Some(("hang-at-round", n)) => Ok(Fault::HangAtRound(round(n)?)),
+        None if spec == "ignore-sigterm" => Ok(Fault::IgnoreSigterm),
+        _ => {
+            bail!("--fault `{spec}`: expected crash-at-round=N, hang-at-round=N or ignore-sigterm")
+        }
+    }
+}
+
+/// `agent run`: a supervised agent asking for its own slot.
 pub fn run(args: &NodeArgs) -> Result<()> {
     let run = RunConfig::new(&args.run_id, SignalMode::Supervised);
     if let Some(parent) = args.parent_pid {
         exit_with_parent(parent)?;
     }
-    let scenario =
-        Arc::new(Scenario::resolve(&args.scenario).map_err(|e| anyhow::anyhow!("scenario: {e}"))?);
-    let comm = CommMode::parse(&args.comm)
-        .with_context(|| format!("--comm `{}`: expected none or flags", args.comm))?;
-    let tree = match &args.bt {
+    let slot = args.uav.checked_sub(1).context("--uav counts from 1")?;
+    let setup = Setup {
+        scenario: args.scenario.clone(),
+        trials: args.trials,
+        seed: args.seed,
+        comm: args.comm.clone(),
+        params: None,
+    };
+    serve(&run, Some(slot), Some(setup), &args.learner, &args.out)
+}
+
+/// `agent --attach RUN_ID`: joins a running simulation on a free route.
+pub fn attach(run_id: &str, args: &AttachArgs) -> Result<()> {
+    let run = RunConfig::new(run_id, SignalMode::Supervised);
+    let slot = args.uav.map(|u| u.checked_sub(1).context("--uav counts from 1")).transpose()?;
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(run_id));
+    serve(&run, slot, None, &args.learner, &out)
+}
+
+/// What the agent must agree on with the run: given on the command line, or read from the
+/// run's description when attaching.
+#[derive(Debug, Clone)]
+struct Setup {
+    scenario: String,
+    trials: usize,
+    seed: u64,
+    comm: String,
+    /// The run's learning parameters, when known from its description.
+    params: Option<LearnParams>,
+}
+
+/// Serves one run: `setup` None means "read it from the run's description" (attaching).
+fn serve(
+    run: &RunConfig,
+    wanted: Option<usize>,
+    setup: Option<Setup>,
+    learner: &LearnerArgs,
+    out: &Path,
+) -> Result<()> {
+    let fault = learner.fault.as_deref().map(parse_fault).transpose()?;
+    let ports = RunServices::open(run)?.into_agent()?;
+    if fault == Some(Fault::IgnoreSigterm) {
+        // SAFETY: setting a signal's disposition to "ignore".
+        unsafe {
+            libc::signal(libc::SIGTERM, libc::SIG_IGN);
+        }
+    }
+    let nonce = join_nonce();
+    let slot_asked = wanted.map_or(ANY_SLOT, |s| s as u32);
+    ports.send_join(&JoinRequest { nonce, pid: std::process::id(), slot: slot_asked })?;
+    let world_timeout = Duration::from_millis(learner.world_timeout_ms);
+    let (slot, first) = await_admission(&ports, nonce, world_timeout)?;
+    let setup = match setup {
+        Some(setup) => setup,
+        None => read_run_info(&ports, world_timeout)?,
+    };
+    let mut session = Session::new(slot, &setup, learner, out)?;
+    tracing::info!(uav = slot + 1, "admitted");
+    let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
+    let mut action = Box::new(Action::new(slot));
+    let mut next_round = first.round;
+    let mut admission = Some(first);
+    loop {
+        let observation = match admission.take() {
+            Some(first) => first,
+            None => ports.waiter().wait(
+                &format_args!("the observation of round {next_round}"),
+                world_timeout,
+                || {
+                    while let Some(sample) = ports.try_observation()? {
+                        if sample.round >= next_round {
+                            return Ok(Some(sample));
+                        }
+                    }
+                    Ok(None)
+                },
+            )?,
+        };
+        next_round = observation.round + 1;
+        if observation.owners[slot] != nonce {
+            bail!("the world dropped UAV{} from the run (presumed dead)", slot + 1);
+        }
+        match fault {
+            Some(Fault::CrashAtRound(r)) if observation.round == r => std::process::abort(),
+            Some(Fault::HangAtRound(r)) if observation.round == r => hang(),
+            _ => {}
+        }
+        session
+            .agent
+            .act(&observation, &mut action)
+            .with_context(|| format!("round {}", observation.round))?;
+        if let Some(trace) = trace.as_mut() {
+            trace.record(&observation, &action, &session.agent)?;
+        }
+        if observation.kind == ObservationKind::Stop as u8 {
+            session.save_all()?;
+            ports.publish_action(&action)?;
+            return Ok(());
+        }
+        session.save_periodic()?;
+        ports.publish_action(&action)?;
+    }
+}
+
+/// A nonce naming this agent's join request: unique among the run's agents.
+fn join_nonce() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    (u64::from(std::process::id()) << 32 ^ nanos) | 1
+}
+
+/// Waits for the world to give this agent a slot (or to refuse it); returns the slot and
+/// the observation that admitted it, which is the first round the agent must answer.
+fn await_admission(
+    ports: &AgentPorts,
+    nonce: u64,
+    timeout: Duration,
+) -> Result<(usize, ObservationSample)> {
+    ports
+        .waiter()
+        .wait(&"admission by the world", timeout, || {
+            while let Some(sample) = ports.try_observation()? {
+                if sample.refused_nonce == nonce {
+                    return Err(TransportError::Refused { run: ports.run_id().to_string() });
+                }
+                if let Some(slot) = sample.owners.iter().position(|&n| n == nonce) {
+                    return Ok(Some((slot, sample)));
+                }
+            }
+            Ok(None)
+        })
+        .map_err(Into::into)
+}
+
+/// Reads the run's description (for an attaching agent).
+fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
+    let info = ports.waiter().wait(&"the run's description", timeout, || ports.try_run_info())?;
+    Ok(Setup {
+        scenario: RunInfo::unpack(&info.scenario, "run_info.scenario")?,
+        trials: info.trials as usize,
+        seed: info.seed,
+        comm: RunInfo::unpack(&info.comm, "run_info.comm")?,
+        params: Some(LearnParams {
+            alpha: info.alpha,
+            gamma: info.gamma,
+            epsilon: info.epsilon,
+            learn: true,
+        }),
+    })
+}
+
+/// Stops answering (fault injection) but still leaves on SIGTERM.
+fn hang() -> ! {
+    loop {
+        std::thread::sleep(Duration::from_millis(10));
+        if termination_requested() {
+            std::process::exit(1);
+        }
+    }
+}
+
+/// The agent with what it needs to save itself.
+struct Session {
+    agent: UavAgent,
+    scenario: String,
+    comm: CommMode,
+    tree_text: String,
+    out: PathBuf,
+    snapshot_every: u64,
+    /// Per trial: training episodes behind the last saved snapshot.
+    saved: Vec<u64>,
+}
+
+impl Session {
+    fn new(slot: usize, setup: &Setup, learner: &LearnerArgs, out: &Path) -> Result<Session> {
+        let scenario = Arc::new(
+            Scenario::resolve(&setup.scenario).map_err(|e| anyhow::anyhow!("scenario: {e}"))?,
+        );
+        let comm = CommMode::parse(&setup.comm).with_context(|| {
+            format!("communication mode `{}`: expected none or flags", setup.comm)
+        })?;
+        let tree = load_tree(learner.bt.as_deref())?;
+        let tree_text = to_text(&tree);
+        let base = setup.params.unwrap_or_default();
+        let params = LearnParams {
+            alpha: learner.alpha.unwrap_or(base.alpha),
+            gamma: learner.gamma.unwrap_or(base.gamma),
+            epsilon: learner.epsilon.unwrap_or(base.epsilon),
+            learn: true,
+        };
+        let spec = AgentSpec {
+            slot,
+            scenario: scenario.clone(),
+            tree,
+            comm,
+            params,
+            seed: setup.seed,
+            trials: setup.trials,
+        };
+        let mut agent = UavAgent::new(&spec)?;
+        if let Some(dir) = &learner.resume {
+            for (trial, part) in agent.trials_mut().iter_mut().enumerate() {
+                let path = snapshot_path(dir, slot, trial);
+                match std::fs::read(&path) {
+                    Ok(bytes) => Snapshot::decode(&bytes)
+                        .and_then(|s| s.restore(part, scenario.name(), comm, &tree_text))
+                        .with_context(|| format!("snapshot {}", path.display()))?,
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                        tracing::warn!(path = %path.display(), "no snapshot for this trial: it starts from scratch");
+                    }
+                    Err(e) => {
+                        return Err(e)
+                            .with_context(|| format!("cannot read snapshot {}", path.display()))
+                    }
+                }
+            }
+        }
+        let saved = agent.trials().iter().map(|t| t.trained_episodes()).collect();
+        Ok(Session {
+            agent,
+            scenario: scenario.name().to_string(),
+            comm,
+            tree_text,
+            out: out.to_path_buf(),
+            snapshot_every: learner.snapshot_every,
+            saved,
+        })
+    }
+
+    fn save_all(&self) -> Result<()> {
+        write_snapshots(&self.agent, &self.out, &self.scenario, self.comm, &self.tree_text)
+            .with_context(|| format!("saving the Q-tables of UAV{}", self.agent.slot() + 1))
+    }
+
+    /// Saves a trial's tables once it has trained `snapshot_every` more episodes.
+    fn save_periodic(&mut self) -> Result<()> {
+        if self.snapshot_every == 0 {
+            return Ok(());
+        }
+        for (trial, part) in self.agent.trials().iter().enumerate() {
+            if part.trained_episodes() < self.saved[trial] + self.snapshot_every {
+                continue;
+            }
+            self.saved[trial] = part.trained_episodes();
+            write_snapshot(part, &self.out, trial, &self.scenario, self.comm, &self.tree_text)?;
+        }
+        Ok(())
+    }
+}
+
+fn load_tree(path: Option<&Path>) -> Result<TreeSpec> {
+    Ok(match path {
         None => parse_tree("fig5.bt", crate::FIG5_TREE, &UavCatalog)?,
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read tree file {}", path.display()))?;
             parse_tree(&path.display().to_string(), &text, &UavCatalog)?
         }
-    };
-    let tree_text = to_text(&tree);
-    let slot = args.uav.checked_sub(1).context("--uav counts from 1")?;
-    let spec = AgentSpec {
-        slot,
-        scenario: scenario.clone(),
-        tree,
-        comm,
-        params: LearnParams {
-            alpha: args.alpha,
-            gamma: args.gamma,
-            epsilon: args.epsilon,
-            learn: true,
-        },
-        seed: args.seed,
-        trials: args.trials,
-    };
-    let mut agent = UavAgent::new(&spec)?;
-    let ports = RunServices::open(&run)?.into_agent()?;
-    let mut action = Box::new(Action::new(slot));
-    let world_timeout = Duration::from_millis(args.world_timeout_ms);
-    let mut trace = args.trace.as_deref().map(Trace::create).transpose()?;
-    let mut next_round = 0u64;
-    loop {
-        let observation = ports.waiter().wait(
-            &format_args!("the observation of round {next_round}"),
-            world_timeout,
-            || {
-                while let Some(sample) = ports.try_observation()? {
-                    if sample.round >= next_round {
-                        return Ok(Some(sample));
-                    }
-                }
-                Ok(None)
-            },
-        )?;
-        next_round = observation.round + 1;
-        if !observation.is_live(slot) {
-            continue;
-        }
-        agent
-            .act(&observation, &mut action)
-            .with_context(|| format!("round {}", observation.round))?;
-        if let Some(trace) = trace.as_mut() {
-            trace.record(&observation, &action, &agent)?;
-        }
-        if observation.kind == ObservationKind::Stop as u8 {
-            write_snapshots(&agent, &args.out, scenario.name(), comm, &tree_text)?;
-            ports.publish_action(&action)?;
-            return Ok(());
-        }
-        ports.publish_action(&action)?;
-    }
+    })
 }

@@ -129,6 +129,26 @@ pub fn snapshot_path(out: &std::path::Path, slot: usize, trial: usize) -> std::p
     out.join("qtables").join(format!("uav{}_trial{}.bin", slot + 1, trial))
 }
 
+/// Writes the snapshot of `agent` in trial `trial` under `out`, through a temporary file
+/// and a rename, so a crash never leaves a torn snapshot behind.
+pub fn write_snapshot(
+    agent: &TrialAgent,
+    out: &std::path::Path,
+    trial: usize,
+    scenario: &str,
+    comm: CommMode,
+    tree: &str,
+) -> std::io::Result<()> {
+    let path = snapshot_path(out, agent.slot(), trial);
+    let partial = path.with_extension("bin.partial");
+    let bytes = Snapshot::of(agent, scenario, trial, comm, tree).encode();
+    path.parent()
+        .map_or(Ok(()), std::fs::create_dir_all)
+        .and_then(|()| std::fs::write(&partial, bytes))
+        .and_then(|()| std::fs::rename(&partial, &path))
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display())))
+}
+
 /// Writes the snapshot of every trial of `agent` under `out` (by whoever owns the agent:
 /// the in-process runner, or the agent process itself).
 pub fn write_snapshots(
@@ -139,14 +159,7 @@ pub fn write_snapshots(
     tree: &str,
 ) -> std::io::Result<()> {
     for (trial, part) in agent.trials().iter().enumerate() {
-        let path = snapshot_path(out, agent.slot(), trial);
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)?;
-        }
-        let bytes = Snapshot::of(part, scenario, trial, comm, tree).encode();
-        std::fs::write(&path, bytes).map_err(|e| {
-            std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display()))
-        })?;
+        write_snapshot(part, out, trial, scenario, comm, tree)?;
     }
     Ok(())
 }

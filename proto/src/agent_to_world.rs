@@ -91,3 +91,20 @@ impl Action {
         }
     }
 }
+
+/// Asks the world for a place in the barrier: sent once by every agent when it starts (the
+/// supervisor's agents ask for their own slot, an attaching agent for any free route).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::JoinRequest")]
+pub struct JoinRequest {
+    /// Identifies the request in the world's answer (`Observation::admitted_nonce`); not 0.
+    pub nonce: u64,
+    /// The agent's process id: the world watches it to notice a dead agent at once.
+    pub pid: u32,
+    /// The slot asked for (0-based), or [`ANY_SLOT`].
+    pub slot: u32,
+}
+
+/// `JoinRequest::slot` of an agent that takes any free route.
+pub const ANY_SLOT: u32 = u32::MAX;

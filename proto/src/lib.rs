@@ -21,11 +21,13 @@ pub mod transport;
 pub mod world_to_agent;
 pub mod world_to_supervisor;
 
-pub use agent_to_world::{Action, TrialAction};
+pub use agent_to_world::{Action, JoinRequest, TrialAction, ANY_SLOT};
 pub use flags::Flags;
 pub use limits::{MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
 pub use pose::{Command, Heading, Height, Pose};
-pub use world_to_agent::{AgentView, Observation, ObservationKind, Phase, TrialObservation};
+pub use world_to_agent::{
+    AgentView, Observation, ObservationKind, Phase, RunInfo, TrialObservation,
+};
 pub use world_to_supervisor::EpisodeReport;
 
 /// A field received from another process held a value outside its range.

@@ -10,6 +10,8 @@ pub const OBSERVATIONS: &str = "observations";
 pub const ACTIONS: &str = "actions";
 pub const EPISODES: &str = "episodes";
 pub const CONTROL: &str = "control";
+pub const JOIN: &str = "join";
+pub const RUN_INFO: &str = "run-info";
 
 /// A run id must be usable inside file names of `/dev/shm`: ASCII letters, digits, `-`, `_`.
 pub fn validate_run_id(run_id: &str) -> Result<(), String> {

@@ -19,7 +19,10 @@ pub struct AgentView {
     pub sees_target: u8,
     /// 1 if this agent has finished its episode and hovers.
     pub finished: u8,
-    pub _reserved: [u8; 2],
+    /// 1 if this agent takes part in this trial's episode (agents that attach join a trial
+    /// at its next episode start).
+    pub member: u8,
+    pub _reserved: u8,
     /// The flags this agent sent in the previous tick (`valid` 0 if none).
     pub flags: Flags,
 }
@@ -40,6 +43,8 @@ pub struct TrialObservation {
     /// [`Phase`] as `u8`: training, or greedy evaluation of what was learned.
     pub phase: u8,
     pub _reserved: [u8; 2],
+    /// Bit i set: agent slot i takes part in this trial's episode (its view's `member`).
+    pub members: u64,
     pub agents: [AgentView; MAX_AGENTS],
 }
 
@@ -52,6 +57,7 @@ impl Default for TrialObservation {
             done: 0,
             phase: Phase::Train as u8,
             _reserved: [0; 2],
+            members: 0,
             agents: [AgentView::default(); MAX_AGENTS],
         }
     }
@@ -100,6 +106,12 @@ pub struct Observation {
     pub _reserved: [u8; 3],
     /// Number of valid entries of `trials`.
     pub n_trials: u32,
+    /// A join request refused in this round because no route was free (its `nonce`; 0:
+    /// none).
+    pub refused_nonce: u64,
+    /// Per slot: the `nonce` of the join request of the agent that holds it (0: free). An
+    /// agent finds its slot here, and learns here if the world has dropped it.
+    pub owners: [u64; MAX_AGENTS],
     pub trials: [TrialObservation; MAX_TRIALS],
 }
 
@@ -111,6 +123,8 @@ impl Default for Observation {
             kind: ObservationKind::Tick as u8,
             _reserved: [0; 3],
             n_trials: 0,
+            refused_nonce: 0,
+            owners: [0; MAX_AGENTS],
             trials: [TrialObservation::default(); MAX_TRIALS],
         }
     }
@@ -127,5 +141,45 @@ impl Observation {
 
     pub fn is_live(&self, agent: usize) -> bool {
         agent < MAX_AGENTS && self.live & (1u64 << agent) != 0
+    }
+}
+
+/// What an agent needs to know to attach to a running run; published once by the world with
+/// history, so an agent that attaches later reads it.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::RunInfo")]
+pub struct RunInfo {
+    /// The scenario as given to the world (`s3`, a path, `gen:...`), UTF-8, NUL-padded.
+    pub scenario: [u8; 512],
+    pub seed: u64,
+    pub trials: u32,
+    /// Communication mode name, UTF-8, NUL-padded (`none`, `flags`, ...).
+    pub comm: [u8; 16],
+    pub alpha: f64,
+    pub gamma: f64,
+    pub epsilon: f64,
+}
+
+impl RunInfo {
+    /// Packs `text` into a NUL-padded field; `None` if it does not fit.
+    pub fn pack<const N: usize>(text: &str) -> Option<[u8; N]> {
+        let bytes = text.as_bytes();
+        if bytes.len() > N || bytes.contains(&0) {
+            return None;
+        }
+        let mut field = [0u8; N];
+        field[..bytes.len()].copy_from_slice(bytes);
+        Some(field)
+    }
+
+    /// The text of a NUL-padded field; an error names the field if it is not UTF-8.
+    pub fn unpack(field: &[u8], name: &'static str) -> Result<String, crate::FieldError> {
+        let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+        std::str::from_utf8(&field[..end]).map(str::to_string).map_err(|_| crate::FieldError {
+            field: name,
+            value: 0,
+            expected: "UTF-8 text".into(),
+        })
     }
 }

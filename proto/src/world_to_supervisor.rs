@@ -21,6 +21,9 @@ pub struct EpisodeReport {
     pub members: u64,
     /// Bit i set: agent slot i did not finish before the tick cap.
     pub truncated: u64,
+    /// Bit i set: agent slot i is in the barrier when the episode ends (joins and losses
+    /// show up here).
+    pub live: u64,
     /// Ticks up to and including the agent's `A-endEpisode` (the cap if truncated).
     pub lengths: [u32; MAX_AGENTS],
 }
@@ -36,6 +39,7 @@ impl Default for EpisodeReport {
             start_tick: 0,
             members: 0,
             truncated: 0,
+            live: 0,
             lengths: [0; MAX_AGENTS],
         }
     }

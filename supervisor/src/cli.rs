@@ -67,6 +67,14 @@ pub enum Figure {
     Fig11,
 }
 
+/// What the supervisor does when an agent process fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Restart {
+    Never,
+    /// Start it again from its latest snapshot (at most a few times per agent).
+    OnFailure,
+}
+
 /// How the world and agents talk.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Transport {
@@ -125,6 +133,22 @@ pub struct RunArgs {
     /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long)]
     pub quiet: bool,
+    /// An agent silent this long within a round is presumed dead and dropped (shm; a
+    /// crashed agent is noticed sooner, its process is watched).
+    #[arg(long, default_value_t = 500)]
+    pub agent_timeout_ms: u64,
+    /// What to do when an agent process fails (shm): nothing, or start it again from its
+    /// latest Q-table snapshot.
+    #[arg(long, value_enum, default_value_t = Restart::Never)]
+    pub restart: Restart,
+    /// Agents save their Q-tables every N training episodes of a trial (shm; 0: only at
+    /// the end). Restarts resume from these.
+    #[arg(long, default_value_t = 1000)]
+    pub snapshot_every: u64,
+    /// Test aid (shm only), off by default: `N=SPEC` makes agent N misbehave; SPEC is
+    /// `crash-at-round=R`, `hang-at-round=R` or `ignore-sigterm`.
+    #[arg(long = "fault", hide = true)]
+    pub faults: Vec<String>,
     /// Test aid (shm only): each agent writes a per-round trace `uav<N>.trace.csv` here.
     #[arg(long, hide = true)]
     pub trace_dir: Option<PathBuf>,

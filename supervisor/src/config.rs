@@ -1,6 +1,6 @@
 //! A run's configuration, resolved from the command line and checked before anything starts.
 
-use crate::cli::{RunArgs, Transport};
+use crate::cli::{Restart, RunArgs, Transport};
 use anyhow::{bail, Context, Result};
 use flockstep_agents::agent::AgentSpec;
 use flockstep_agents::bt::parse::parse_tree;
@@ -36,6 +36,11 @@ pub struct RunConfig {
     pub run_id: String,
     pub quiet: bool,
     pub trace_dir: Option<PathBuf>,
+    pub agent_timeout_ms: u64,
+    pub restart: Restart,
+    pub snapshot_every: u64,
+    /// Per agent slot: the fault to inject (test aid).
+    pub faults: Vec<(usize, String)>,
 }
 
 impl RunConfig {
@@ -109,6 +114,10 @@ impl RunConfig {
             run_id,
             quiet: args.quiet,
             trace_dir: args.trace_dir.clone(),
+            agent_timeout_ms: args.agent_timeout_ms,
+            restart: args.restart,
+            snapshot_every: args.snapshot_every,
+            faults: parse_faults(&args.faults, args.uavs)?,
         })
     }
 
@@ -151,6 +160,25 @@ pub fn load_tree(path: Option<&PathBuf>) -> Result<TreeSpec> {
             Ok(parse_tree(&path.display().to_string(), &text, &UavCatalog)?)
         }
     }
+}
+
+/// `N=SPEC` pairs (N 1-based) into (slot, SPEC); the agent checks SPEC itself.
+fn parse_faults(faults: &[String], uavs: usize) -> Result<Vec<(usize, String)>> {
+    faults
+        .iter()
+        .map(|f| {
+            let (uav, spec) =
+                f.split_once('=').with_context(|| format!("--fault `{f}`: expected N=SPEC"))?;
+            let uav: usize = uav
+                .parse()
+                .with_context(|| format!("--fault `{f}`: `{uav}` is not an agent number"))?;
+            anyhow::ensure!(
+                (1..=uavs).contains(&uav),
+                "--fault `{f}`: agent {uav} is not one of 1..={uavs}"
+            );
+            Ok((uav - 1, spec.to_string()))
+        })
+        .collect()
 }
 
 fn default_run_id() -> String {

@@ -46,6 +46,7 @@ impl Recorder {
             .max()
             .unwrap_or(0);
         self.env_steps += duration * u64::from(report.members.count_ones());
+        self.live = report.live.count_ones() as usize;
         if report.phase == Phase::Train as u8 {
             self.bar.inc(1);
         }

@@ -2,11 +2,14 @@
 //!
 //! The supervisor sweeps the stale resources of crashed runs, starts the world (which creates
 //! the run's services), opens the run as a reader of episode records, starts the agents, and
-//! then records what the world reports until the world exits. Ctrl-C asks the world to stop
-//! at the end of the current round; every child is then brought down by the shutdown ladder
-//! and what is left of the run in shared memory is removed.
+//! then records what the world reports until the world exits. It watches its children: a
+//! failed agent is reported (the world drops it from the barrier) and, with `--restart
+//! on-failure`, started again from its latest snapshot; a failed world ends the run at once.
+//! Ctrl-C asks the world to stop at the end of the current round. Every child is finally
+//! brought down by the shutdown ladder and what is left of the run in shared memory removed.
 
 use crate::children::{shut_down, Process};
+use crate::cli::Restart;
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
 use crate::run::Outcome;
@@ -25,6 +28,8 @@ use std::time::{Duration, Instant};
 const WORLD_START: Duration = Duration::from_secs(30);
 /// How long children may take to leave by themselves once the world is done.
 const GRACE: Duration = Duration::from_secs(10);
+/// Restarts of one agent before the supervisor gives up on it.
+const MAX_RESTARTS: u32 = 5;
 
 pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Result<Outcome> {
     let swept = sweep_stale_runs().context("cleaning stale resources of earlier runs")?;
@@ -33,24 +38,116 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     }
     let logs = config.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
-    let mut processes =
-        vec![Process::spawn("world", world_command(config)?, &logs.join("world.log"))?];
-    let result = open_ports(config, &mut processes[0]).and_then(|ports| {
+    let mut fleet =
+        Fleet { config, processes: Vec::new(), slots: Vec::new(), restarts: vec![0; config.uavs] };
+    fleet.processes.push(Process::spawn("world", world_command(config)?, &logs.join("world.log"))?);
+    fleet.slots.push(None);
+    let result = open_ports(config, &mut fleet.processes[0]).and_then(|ports| {
         for slot in 0..config.uavs {
-            let name = format!("UAV{}", slot + 1);
-            let log = logs.join(format!("uav{}.log", slot + 1));
-            processes.push(Process::spawn(&name, agent_command(config, slot)?, &log)?);
+            fleet.spawn_agent(slot, false)?;
         }
         recorder.set_live(config.uavs);
-        supervise(&ports, &mut processes, recorder, stop)
+        fleet.supervise(&ports, recorder, stop)
     });
-    let forced = shut_down(&mut processes, GRACE)?;
+    // A failed run brings its children down at once; a finished one lets them leave.
+    let grace = if result.is_ok() { GRACE } else { Duration::ZERO };
+    let forced = shut_down(&mut fleet.processes, grace)?;
     cleanup_run(&config.run_id).context("removing the run's shared-memory resources")?;
     let mut outcome = result?;
     if !forced.is_empty() {
         outcome.notes.push(format!("had to signal {} to stop", forced.join(", ")));
     }
     Ok(outcome)
+}
+
+/// The world and the agent processes of a run.
+struct Fleet<'a> {
+    config: &'a RunConfig,
+    processes: Vec<Process>,
+    /// Per process: the agent slot it serves (None: the world).
+    slots: Vec<Option<usize>>,
+    restarts: Vec<u32>,
+}
+
+impl Fleet<'_> {
+    fn spawn_agent(&mut self, slot: usize, resume: bool) -> Result<()> {
+        let logs = self.config.out.join("logs");
+        let (name, log) = match self.restarts[slot] {
+            0 => (format!("UAV{}", slot + 1), logs.join(format!("uav{}.log", slot + 1))),
+            n => (
+                format!("UAV{} (restart {n})", slot + 1),
+                logs.join(format!("uav{}.restart{n}.log", slot + 1)),
+            ),
+        };
+        let command = agent_command(self.config, slot, resume)?;
+        self.processes.push(Process::spawn(&name, command, &log)?);
+        self.slots.push(Some(slot));
+        Ok(())
+    }
+
+    /// Records episode reports until the world exits; asks it to stop on Ctrl-C; reports
+    /// and, if asked, restarts failed agents.
+    fn supervise(
+        &mut self,
+        ports: &SupervisorPorts,
+        recorder: &mut Recorder,
+        stop: &AtomicBool,
+    ) -> Result<Outcome> {
+        let mut stop_sent = false;
+        let mut notes = Vec::new();
+        let mut reported = vec![false; self.processes.len()];
+        loop {
+            while let Some(report) = ports.try_episode()? {
+                recorder.record(&report)?;
+            }
+            recorder.redraw();
+            if stop.load(Ordering::Relaxed) && !stop_sent {
+                ports.send_control(&Control { stop: 1, ..Control::default() })?;
+                stop_sent = true;
+            }
+            if let Some(status) = self.processes[0].status()? {
+                while let Some(report) = ports.try_episode()? {
+                    recorder.record(&report)?;
+                }
+                if !status.success() {
+                    bail!(
+                        "the world process failed ({status}): {}",
+                        self.processes[0].last_words()
+                    );
+                }
+                return Ok(Outcome { complete: !stop_sent, notes });
+            }
+            reported.resize(self.processes.len(), false);
+            for i in 1..self.processes.len() {
+                let Some(status) = self.processes[i].status()? else { continue };
+                if status.success() || reported[i] {
+                    continue;
+                }
+                reported[i] = true;
+                let process = &self.processes[i];
+                let note = format!("{} failed ({status}): {}", process.name, process.last_words());
+                tracing::warn!("{note}; the run goes on without it");
+                notes.push(note);
+                let slot = self.slots[i].expect("agent processes serve a slot");
+                if self.config.restart == Restart::OnFailure
+                    && !stop_sent
+                    && self.restarts[slot] < MAX_RESTARTS
+                {
+                    self.restarts[slot] += 1;
+                    self.spawn_agent(slot, true)?;
+                    notes.push(format!("UAV{} restarted from its latest snapshot", slot + 1));
+                }
+            }
+            match ports
+                .waiter()
+                .wait(&"episode records", Duration::from_millis(50), || ports.try_episode())
+            {
+                Ok(report) => recorder.record(&report)?,
+                Err(TransportError::Timeout { .. }) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
 }
 
 fn sibling(name: &str) -> Result<PathBuf> {
@@ -73,11 +170,16 @@ fn world_command(config: &RunConfig) -> Result<Command> {
         .args(["--episodes", &config.episodes.train_episodes.to_string()])
         .args(["--eval-episodes", &config.episodes.eval_episodes.to_string()])
         .args(["--tick-cap", &config.episodes.tick_cap.to_string()])
+        .args(["--comm", config.comm.name()])
+        .args(["--alpha", &config.params.alpha.to_string()])
+        .args(["--gamma", &config.params.gamma.to_string()])
+        .args(["--epsilon", &config.params.epsilon.to_string()])
+        .args(["--agent-timeout-ms", &config.agent_timeout_ms.to_string()])
         .args(["--parent-pid", &std::process::id().to_string()]);
     Ok(command)
 }
 
-fn agent_command(config: &RunConfig, slot: usize) -> Result<Command> {
+fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Command> {
     let mut command = Command::new(sibling("agent")?);
     command
         .arg("run")
@@ -92,14 +194,22 @@ fn agent_command(config: &RunConfig, slot: usize) -> Result<Command> {
         .args(["--alpha", &config.params.alpha.to_string()])
         .args(["--gamma", &config.params.gamma.to_string()])
         .args(["--epsilon", &config.params.epsilon.to_string()])
+        .args(["--snapshot-every", &config.snapshot_every.to_string()])
         .arg("--out")
         .arg(&config.out)
         .args(["--parent-pid", &std::process::id().to_string()]);
     if let Some(bt) = &config.bt_path {
         command.arg("--bt").arg(bt);
     }
+    if resume {
+        command.arg("--resume").arg(&config.out);
+    }
     if let Some(dir) = &config.trace_dir {
         command.arg("--trace").arg(dir.join(format!("uav{}.trace.csv", slot + 1)));
+    }
+    // A fault is injected once: a restarted agent behaves.
+    if let Some((_, fault)) = config.faults.iter().find(|(s, _)| *s == slot).filter(|_| !resume) {
+        command.args(["--fault", fault]);
     }
     Ok(command)
 }
@@ -120,61 +230,6 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
                 "the world process exited ({status}) before the run started: {}",
                 world.last_words()
             );
-        }
-    }
-}
-
-/// Records episode reports until the world exits; asks it to stop on Ctrl-C.
-fn supervise(
-    ports: &SupervisorPorts,
-    processes: &mut [Process],
-    recorder: &mut Recorder,
-    stop: &AtomicBool,
-) -> Result<Outcome> {
-    let mut stop_sent = false;
-    let mut notes = Vec::new();
-    let mut failed_agents = vec![false; processes.len()];
-    loop {
-        while let Some(report) = ports.try_episode()? {
-            recorder.record(&report)?;
-        }
-        recorder.redraw();
-        if stop.load(Ordering::Relaxed) && !stop_sent {
-            ports.send_control(&Control { stop: 1, ..Control::default() })?;
-            stop_sent = true;
-        }
-        for (i, p) in processes.iter_mut().enumerate().skip(1) {
-            if let Some(status) = p.status()? {
-                if !status.success() && !failed_agents[i] {
-                    failed_agents[i] = true;
-                    notes.push(format!("{} exited ({status}): {}", p.name, p.last_words()));
-                }
-            }
-        }
-        recorder.set_live(
-            processes
-                .iter_mut()
-                .skip(1)
-                .filter_map(|p| p.status().ok())
-                .filter(Option::is_none)
-                .count(),
-        );
-        if let Some(status) = processes[0].status()? {
-            while let Some(report) = ports.try_episode()? {
-                recorder.record(&report)?;
-            }
-            if !status.success() {
-                bail!("the world process failed ({status}): {}", processes[0].last_words());
-            }
-            return Ok(Outcome { complete: !stop_sent, notes });
-        }
-        match ports
-            .waiter()
-            .wait(&"episode records", Duration::from_millis(50), || ports.try_episode())
-        {
-            Ok(report) => recorder.record(&report)?,
-            Err(TransportError::Timeout { .. }) => {}
-            Err(e) => return Err(e.into()),
         }
     }
 }

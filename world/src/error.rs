@@ -93,6 +93,9 @@ pub enum WorldError {
         t = .target + 1
     )]
     Fact { file: String, line: usize, uav: usize, target: usize, expected: String, actual: String },
+    /// A `gen:` scenario spec that is malformed, out of range, or cannot be generated.
+    #[error("scenario spec `{spec}`: {problem}")]
+    Spec { spec: String, problem: String },
     /// A candidate target no pose of any route sees: an episode drawing it could never end.
     #[error(
         "{file}:{line}:{col}: target {label} at {row},{col_in_grid} is visible from no pose of \

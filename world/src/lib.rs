@@ -9,6 +9,7 @@
 //! - [`node`]: the `world` process around [`sim::World`].
 
 pub mod error;
+pub mod generate;
 pub mod map;
 pub mod node;
 pub mod optimum;

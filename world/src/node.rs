@@ -1,20 +1,23 @@
-//! The `world` process: owns a run's services, the barrier and the ground truth.
+//! The `world` process: owns a run's services, the barrier, the membership and the ground
+//! truth.
 //!
-//! Each round it publishes the observation of every trial, waits until every live agent has
-//! answered that round (each wait bounded: an agent silent past `--agent-timeout-ms` is
-//! presumed dead), applies the actions, and hands finished episodes to the supervisor. It is
-//! the same [`World`] the in-process runner drives; only the message passing differs.
+//! Each round it admits agents that asked to join, publishes the observation of every
+//! trial, waits until every live agent has answered that round, applies the actions, and
+//! hands finished episodes to the supervisor. An agent whose process is gone, or that stays
+//! silent past `--agent-timeout-ms`, is dropped from the barrier and the run goes on. It
+//! drives the same [`World`] as the in-process runner; only the message passing differs.
+//! `docs/MEMBERSHIP.md` describes the protocol and the failure model.
 
 use crate::scenario::Scenario;
 use crate::sim::{EpisodeConfig, World};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
 use flockstep_proto::transport::{
-    exit_with_parent, RunConfig, RunServices, SignalMode, WorldPorts,
+    exit_with_parent, RunConfig, RunServices, SignalMode, TransportError, WorldPorts,
 };
-use flockstep_proto::{Observation, ObservationKind, MAX_AGENTS};
+use flockstep_proto::{JoinRequest, Observation, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The world process of a run (started by the supervisor).
 #[derive(Debug, Clone, Parser)]
@@ -26,9 +29,10 @@ use std::time::Duration;
 pub struct WorldArgs {
     #[arg(long)]
     pub run_id: String,
-    /// s1, s2, s3 or a path to a .map file.
+    /// s1, s2, s3, gen:... or a path to a .map file.
     #[arg(long)]
     pub scenario: String,
+    /// Agents that start with the run (slots 1..=N); more may attach later.
     #[arg(long)]
     pub uavs: usize,
     #[arg(long)]
@@ -41,10 +45,20 @@ pub struct WorldArgs {
     pub eval_episodes: u64,
     #[arg(long)]
     pub tick_cap: u32,
-    /// An agent silent this long within a round is presumed dead.
-    #[arg(long, default_value_t = 2000)]
+    /// The run's communication mode and learning parameters, told to attaching agents.
+    #[arg(long)]
+    pub comm: String,
+    #[arg(long)]
+    pub alpha: f64,
+    #[arg(long)]
+    pub gamma: f64,
+    #[arg(long)]
+    pub epsilon: f64,
+    /// An agent silent this long within a round is presumed dead (a crashed agent is
+    /// noticed sooner: its process is watched).
+    #[arg(long, default_value_t = 500)]
     pub agent_timeout_ms: u64,
-    /// How long to wait for every agent and the supervisor to connect.
+    /// How long to wait for the starting agents and the supervisor to connect.
     #[arg(long, default_value_t = 30_000)]
     pub startup_timeout_ms: u64,
     /// Exit when this process (the supervisor) is gone.
@@ -57,9 +71,10 @@ pub fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
-                .unwrap_or_else(|_| "warn".into()),
+                .unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     match run(&WorldArgs::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -82,93 +97,279 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         eval_episodes: args.eval_episodes,
         tick_cap: args.tick_cap,
     };
-    let mut world = World::new(Arc::new(scenario), args.uavs, args.trials, args.seed, config)?;
+    let world = World::new(Arc::new(scenario), args.uavs, args.trials, args.seed, config)?;
     let ports = RunServices::create(&run)?.into_world()?;
-    ports.wait_for_peers(args.uavs, true, Duration::from_millis(args.startup_timeout_ms))?;
-    barrier(&mut world, &ports, Duration::from_millis(args.agent_timeout_ms))
+    ports.publish_run_info(&run_info(args)?)?;
+    let startup = Duration::from_millis(args.startup_timeout_ms);
+    ports.wait_for_peers(0, true, startup)?;
+    let mut node = WorldNode {
+        world,
+        ports,
+        members: Members::default(),
+        agent_timeout: Duration::from_millis(args.agent_timeout_ms),
+    };
+    node.await_starting_agents(args.uavs, startup)?;
+    node.barrier()
 }
 
-/// Runs rounds until every trial is done or the supervisor asks to stop, then tells the
-/// agents to stop and waits for each one's last answer (its snapshots are written then).
-fn barrier(world: &mut World, ports: &WorldPorts, agent_timeout: Duration) -> Result<()> {
-    let mut observation = Box::<Observation>::default();
-    let mut reports = Vec::new();
-    let mut stop_requested = false;
-    loop {
-        world.observe(&mut observation);
-        if stop_requested {
-            observation.kind = ObservationKind::Stop as u8;
-        }
-        ports.publish_observation(&observation)?;
-        let stopping = observation.kind == ObservationKind::Stop as u8;
-        // The agents' last answer comes after their snapshots: allow for writing them.
-        let timeout =
-            if stopping { agent_timeout.max(Duration::from_secs(30)) } else { agent_timeout };
-        collect_actions(world, ports, &observation, timeout, &mut stop_requested, !stopping)?;
-        if stopping {
-            return Ok(());
-        }
-        world.end_round(&mut reports);
-        for report in reports.drain(..) {
-            ports.publish_episode(&report)?;
-        }
+fn run_info(args: &WorldArgs) -> Result<RunInfo> {
+    Ok(RunInfo {
+        scenario: RunInfo::pack(&args.scenario).context("--scenario is longer than 512 bytes")?,
+        seed: args.seed,
+        trials: args.trials as u32,
+        comm: RunInfo::pack(&args.comm).context("--comm is longer than 16 bytes")?,
+        alpha: args.alpha,
+        gamma: args.gamma,
+        epsilon: args.epsilon,
+    })
+}
+
+/// Who holds which slot: the nonce of its join request and its process id.
+#[derive(Debug)]
+struct Members {
+    owners: [u64; MAX_AGENTS],
+    pids: [u32; MAX_AGENTS],
+    /// Join requests read before the agent count was complete, answered in the first round.
+    waiting: Vec<JoinRequest>,
+    /// A join request refused in the round being prepared (0: none).
+    refused: u64,
+}
+
+impl Default for Members {
+    fn default() -> Self {
+        Members { owners: [0; MAX_AGENTS], pids: [0; MAX_AGENTS], waiting: Vec::new(), refused: 0 }
     }
 }
 
-/// Waits for the answer of every live agent to `observation`'s round and applies them
-/// (unless `apply` is false: the answers to a stop). Answers to other rounds, from slots
-/// not in the barrier, or that fail the checks are logged and dropped.
-fn collect_actions(
-    world: &mut World,
-    ports: &WorldPorts,
-    observation: &Observation,
-    timeout: Duration,
-    stop_requested: &mut bool,
-    apply: bool,
-) -> Result<()> {
-    let round = observation.round;
-    let live = observation.live;
-    let mut answered = 0u64;
-    let waited =
-        ports.waiter().wait(&format_args!("the answers of round {round}"), timeout, || {
-            while let Some(action) = ports.try_action()? {
-                let slot = action.agent as usize;
-                if action.round != round || slot >= MAX_AGENTS || live & (1 << slot) == 0 {
-                    tracing::warn!(
-                        round,
-                        action.round,
-                        action.agent,
-                        "dropped an action that does not answer this round"
-                    );
-                    continue;
-                }
-                if answered & (1 << slot) != 0 {
-                    tracing::warn!(
-                        round,
-                        agent = slot + 1,
-                        "dropped a second action of one agent in one round"
-                    );
-                    continue;
-                }
-                if apply {
-                    if let Err(e) = world.apply(&action) {
-                        tracing::warn!(round, agent = slot + 1, "dropped an invalid action: {e}");
-                        continue;
+struct WorldNode {
+    world: World,
+    ports: WorldPorts,
+    members: Members,
+    agent_timeout: Duration,
+}
+
+impl WorldNode {
+    /// Waits until the agents the supervisor starts (slots 0..uavs) have asked to join.
+    fn await_starting_agents(&mut self, uavs: usize, timeout: Duration) -> Result<()> {
+        let Self { ports, members, .. } = self;
+        ports.waiter().wait(
+            &format_args!("the join requests of the {uavs} starting agents"),
+            timeout,
+            || {
+                while let Some(request) = ports.try_join()? {
+                    let slot = request.slot as usize;
+                    if request.nonce != 0 && slot < uavs && members.owners[slot] == 0 {
+                        members.owners[slot] = request.nonce;
+                        members.pids[slot] = request.pid;
+                    } else {
+                        members.waiting.push(request);
                     }
                 }
-                answered |= 1 << slot;
-            }
-            while let Some(control) = ports.try_control()? {
-                *stop_requested |= control.stop == 1;
-            }
-            Ok((answered == live).then_some(()))
-        });
-    if let Err(e) = waited {
-        let silent: Vec<String> = (0..MAX_AGENTS)
-            .filter(|&slot| live & !answered & (1 << slot) != 0)
-            .map(|slot| format!("UAV{}", slot + 1))
-            .collect();
-        bail!("{e}; silent: {} (presumed dead)", silent.join(", "));
+                Ok(members.owners[..uavs].iter().all(|&n| n != 0).then_some(()))
+            },
+        )?;
+        Ok(())
     }
-    Ok(())
+
+    /// Answers join requests: a free route (the one asked for if free) from the next round
+    /// on, or a refusal. The trials let the agent in at their next episode start.
+    fn admit_joiners(&mut self) -> Result<()> {
+        let mut requests = std::mem::take(&mut self.members.waiting);
+        while let Some(request) = self.ports.try_join()? {
+            requests.push(request);
+        }
+        for request in requests {
+            if request.nonce == 0 || self.members.owners.contains(&request.nonce) {
+                tracing::warn!(
+                    nonce = request.nonce,
+                    "ignored a join request with a used or zero nonce"
+                );
+                continue;
+            }
+            let wanted = (request.slot != ANY_SLOT).then_some(request.slot as usize);
+            match self.world.free_slot(wanted) {
+                Some(slot) => {
+                    self.world.admit(slot);
+                    self.members.owners[slot] = request.nonce;
+                    self.members.pids[slot] = request.pid;
+                    tracing::info!(
+                        uav = slot + 1,
+                        pid = request.pid,
+                        "agent admitted; it joins each trial at its next episode"
+                    );
+                }
+                None => {
+                    self.members.refused = request.nonce;
+                    tracing::warn!(
+                        pid = request.pid,
+                        "join refused: every route of the scenario is taken"
+                    );
+                }
+            }
+            // An attaching agent subscribed to the run's description after it was published.
+            self.ports.serve_run_info()?;
+        }
+        Ok(())
+    }
+
+    /// Drops agent `slot` from the barrier and every trial.
+    fn drop_agent(&mut self, slot: usize, why: &str) {
+        tracing::warn!(
+            uav = slot + 1,
+            pid = self.members.pids[slot],
+            "agent dropped from the run: {why}"
+        );
+        self.world.remove(slot);
+        self.members.owners[slot] = 0;
+        self.members.pids[slot] = 0;
+        let cleaned = self.ports.services().cleanup_dead_nodes();
+        if cleaned > 0 {
+            tracing::info!(nodes = cleaned, "removed the resources of dead nodes");
+        }
+    }
+
+    /// Runs rounds until every trial is done or the supervisor asks to stop, then tells the
+    /// agents to stop and waits for each one's last answer (its snapshots are written then).
+    fn barrier(&mut self) -> Result<()> {
+        let mut observation = Box::<Observation>::default();
+        let mut reports = Vec::new();
+        let mut stop_requested = false;
+        loop {
+            self.admit_joiners()?;
+            self.world.observe(&mut observation);
+            observation.owners = self.members.owners;
+            observation.refused_nonce = std::mem::take(&mut self.members.refused);
+            if stop_requested {
+                observation.kind = ObservationKind::Stop as u8;
+            }
+            self.ports.publish_observation(&observation)?;
+            let stopping = observation.kind == ObservationKind::Stop as u8;
+            // The agents' last answer comes after their snapshots: allow for writing them.
+            let timeout = if stopping {
+                self.agent_timeout.max(Duration::from_secs(30))
+            } else {
+                self.agent_timeout
+            };
+            let answered =
+                self.collect_actions(&observation, timeout, &mut stop_requested, !stopping)?;
+            if stopping {
+                return Ok(());
+            }
+            for slot in slots(observation.live & !answered.answered) {
+                let why = if answered.gone & (1 << slot) != 0 {
+                    "its process is gone"
+                } else {
+                    "silent past the deadline"
+                };
+                self.drop_agent(slot, why);
+            }
+            if self.world.live() == 0 {
+                bail!("every agent is gone: the run cannot go on");
+            }
+            self.world.end_round(&mut reports);
+            for report in reports.drain(..) {
+                self.ports.publish_episode(&report)?;
+            }
+        }
+    }
+
+    /// Waits for the answer of every live agent to `observation`'s round and applies them
+    /// (unless `apply` is false: the answers to a stop). Answers to other rounds, from slots
+    /// not in the barrier, or that fail the checks are logged and dropped. Ends early when
+    /// every agent still missing is known to be dead; ends at `timeout` otherwise.
+    fn collect_actions(
+        &mut self,
+        observation: &Observation,
+        timeout: Duration,
+        stop_requested: &mut bool,
+        apply: bool,
+    ) -> Result<Answers> {
+        let Self { world, ports, members, .. } = self;
+        let round = observation.round;
+        let live = observation.live;
+        let started = Instant::now();
+        let mut answers = Answers::default();
+        let waited =
+            ports.waiter().wait(&format_args!("the answers of round {round}"), timeout, || {
+                while let Some(action) = ports.try_action()? {
+                    let slot = action.agent as usize;
+                    if action.round != round || slot >= MAX_AGENTS || live & (1 << slot) == 0 {
+                        tracing::warn!(
+                            round,
+                            action.round,
+                            action.agent,
+                            "dropped an action that does not answer this round"
+                        );
+                        continue;
+                    }
+                    if answers.answered & (1 << slot) != 0 {
+                        tracing::warn!(
+                            round,
+                            uav = slot + 1,
+                            "dropped a second action of one agent in one round"
+                        );
+                        continue;
+                    }
+                    if apply {
+                        if let Err(e) = world.apply(&action) {
+                            tracing::warn!(round, uav = slot + 1, "dropped an invalid action: {e}");
+                            continue;
+                        }
+                    }
+                    answers.answered |= 1 << slot;
+                }
+                while let Some(control) = ports.try_control()? {
+                    *stop_requested |= control.stop == 1;
+                }
+                let missing = live & !answers.answered;
+                if missing == 0 {
+                    return Ok(Some(()));
+                }
+                // Rounds take microseconds: only a round this slow is worth a look at processes.
+                if started.elapsed() > DEATH_CHECK_AFTER {
+                    answers.gone = slots(missing)
+                        .filter(|&s| !process_alive(members.pids[s]))
+                        .fold(0, |m, s| m | 1 << s);
+                    if answers.gone == missing {
+                        return Ok(Some(()));
+                    }
+                }
+                Ok(None)
+            });
+        match waited {
+            Ok(()) | Err(TransportError::Timeout { .. }) => Ok(answers),
+            Err(e) => Err(e.into()),
+        }
+    }
+}
+
+/// Who answered a round, and who is known to be dead.
+#[derive(Debug, Default, Clone, Copy)]
+struct Answers {
+    answered: u64,
+    gone: u64,
+}
+
+/// How long a round may take before the world checks whether the missing agents live.
+const DEATH_CHECK_AFTER: Duration = Duration::from_millis(20);
+
+/// The slots whose bits are set in `mask`.
+fn slots(mask: u64) -> impl Iterator<Item = usize> {
+    (0..MAX_AGENTS).filter(move |s| mask & (1 << s) != 0)
+}
+
+/// Whether process `pid` exists and is not a zombie (a killed agent stays a zombie until
+/// the supervisor reaps it). Pid 0 (unknown) counts as alive: the deadline decides then.
+fn process_alive(pid: u32) -> bool {
+    if pid == 0 {
+        return true;
+    }
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        // The state follows the parenthesised command name, which may contain spaces.
+        Ok(stat) => stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .is_some_and(|state| state != "Z" && state != "X"),
+        Err(_) => false,
+    }
 }

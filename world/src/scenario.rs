@@ -14,11 +14,13 @@ use crate::error::WorldError;
 use crate::map::{fact_poses, parse_map, pose_key, target_label, Expect, MapFile};
 use crate::visibility;
 
-/// The thesis's maps, embedded so that a run needs no files: (name, file name, text).
-const BUILTIN: [(&str, &str, &str); 3] = [
+/// The thesis's maps (s1-s3) and s4 (s3 with a free third route for attaching agents),
+/// embedded so that a run needs no files: (name, file name, text).
+const BUILTIN: [(&str, &str, &str); 4] = [
     ("s1", "s1_one_uav_one_target.map", include_str!("../maps/s1_one_uav_one_target.map")),
     ("s2", "s2_one_uav_two_targets.map", include_str!("../maps/s2_one_uav_two_targets.map")),
     ("s3", "s3_two_uavs_two_targets.map", include_str!("../maps/s3_two_uavs_two_targets.map")),
+    ("s4", "s4_three_uavs_two_targets.map", include_str!("../maps/s4_three_uavs_two_targets.map")),
 ];
 
 /// Index of `pose` within its UAV's slice of the table: 2 heights x 4 headings a waypoint.
@@ -71,12 +73,17 @@ impl Scenario {
         Scenario::from_text(file, text).ok()
     }
 
-    /// `s1`, `s2`, `s3`, or else the path of a `.map` file.
+    /// `s1`, `s2`, `s3`, a generated scenario `gen:key=value,...` (see
+    /// [`crate::generate`]), or else the path of a `.map` file (write `./gen:...` for a
+    /// file whose name starts with `gen:`).
     pub fn resolve(spec: &str) -> Result<Scenario, WorldError> {
-        match BUILTIN.iter().find(|b| b.0 == spec) {
-            Some((_, file, text)) => Scenario::from_text(file, text),
-            None => Scenario::load(Path::new(spec)),
+        if let Some((_, file, text)) = BUILTIN.iter().find(|b| b.0 == spec) {
+            return Scenario::from_text(file, text);
         }
+        if crate::generate::GenSpec::is_gen(spec) {
+            return crate::generate::generate(spec);
+        }
+        Scenario::load(Path::new(spec))
     }
 
     fn build(source: &str, map: MapFile, source_text: String) -> Result<Scenario, WorldError> {

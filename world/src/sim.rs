@@ -42,6 +42,8 @@ pub struct TrialWorld {
     eval_rng: Xoshiro256PlusPlus,
     /// Agent slots taking part in the current episode.
     members: u64,
+    /// Agent slots admitted to the run that join at the next episode start.
+    joining: u64,
     poses: Vec<Pose>,
     /// Per slot: the episode length if it finished, else 0.
     finished_at: Vec<u32>,
@@ -75,6 +77,7 @@ impl TrialWorld {
             train_rng: rng(seed::WORLD_TRAIN),
             eval_rng: rng(seed::WORLD_EVAL),
             members,
+            joining: 0,
             poses: vec![scenario.start_pose(); slots],
             finished_at: vec![0; slots],
             flags: vec![Flags::default(); slots],
@@ -95,6 +98,8 @@ impl TrialWorld {
     }
 
     fn start_episode(&mut self) {
+        self.members |= self.joining;
+        self.joining = 0;
         let start = self.scenario.start_pose();
         self.poses.fill(start);
         self.finished_at.fill(0);
@@ -115,6 +120,7 @@ impl TrialWorld {
         out.episode_tick = self.episode_tick;
         out.done = self.done as u8;
         out.phase = self.phase as u8;
+        out.members = self.members;
         for slot in 0..self.poses.len() {
             let view = &mut out.agents[slot];
             if self.members & (1 << slot) == 0 {
@@ -125,6 +131,7 @@ impl TrialWorld {
             view.pose = pose;
             view.sees_target = (self.scenario.visible_targets(slot, pose) >> self.target & 1) as u8;
             view.finished = (self.finished_at[slot] != 0) as u8;
+            view.member = 1;
             view.flags = self.flags[slot];
         }
     }
@@ -204,10 +211,16 @@ impl TrialWorld {
         self.done
     }
 
-    /// Changes who takes part; effective for the episode in progress (a departed slot is
-    /// no longer waited for, a new one is admitted by the caller at an episode boundary).
-    pub fn set_members(&mut self, members: u64) {
-        self.members = members;
+    /// Agent `slot` joins this trial at its next episode start.
+    pub fn admit(&mut self, slot: usize) {
+        self.joining |= 1 << slot;
+    }
+
+    /// Agent `slot` is gone: the episode in progress goes on without it, and its part of
+    /// that episode is not reported.
+    pub fn remove(&mut self, slot: usize) {
+        self.members &= !(1 << slot);
+        self.joining &= !(1 << slot);
     }
 
     pub fn episode_tick(&self) -> u32 {
@@ -312,7 +325,11 @@ impl World {
 
     /// Closes the round: every trial ends its tick; finished episodes go to `reports`.
     pub fn end_round(&mut self, reports: &mut Vec<EpisodeReport>) {
+        let first = reports.len();
         reports.extend(self.trials.iter_mut().filter_map(TrialWorld::end_tick));
+        for report in &mut reports[first..] {
+            report.live = self.live;
+        }
         self.round += 1;
     }
 
@@ -327,6 +344,34 @@ impl World {
     /// Agent slots in the barrier.
     pub fn live(&self) -> u64 {
         self.live
+    }
+
+    /// The slot an agent asking for `wanted` (None: any) gets: that slot if its route is
+    /// free, else the first free route; None if every route is taken.
+    pub fn free_slot(&self, wanted: Option<usize>) -> Option<usize> {
+        let routes = self.trials.first().map_or(0, |t| t.poses.len()).min(MAX_AGENTS);
+        let free = |slot: usize| slot < routes && self.live & (1 << slot) == 0;
+        match wanted {
+            Some(slot) if free(slot) => Some(slot),
+            _ => (0..routes).find(|&slot| free(slot)),
+        }
+    }
+
+    /// Admits agent `slot` to the barrier from the next round on; each trial lets it take
+    /// part from its next episode start.
+    pub fn admit(&mut self, slot: usize) {
+        self.live |= 1 << slot;
+        for trial in &mut self.trials {
+            trial.admit(slot);
+        }
+    }
+
+    /// Drops agent `slot` from the barrier and from every trial.
+    pub fn remove(&mut self, slot: usize) {
+        self.live &= !(1 << slot);
+        for trial in &mut self.trials {
+            trial.remove(slot);
+        }
     }
 
     pub fn trials(&self) -> &[TrialWorld] {

@@ -6,9 +6,9 @@ use super::{
     termination_requested, Ipc, RunServices, TransportError, Waiter, WAKE_AGENTS, WAKE_SUPERVISOR,
     WAKE_WORLD,
 };
-use crate::services::{ACTIONS, CONTROL, EPISODES, OBSERVATIONS};
+use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
-use crate::{Action, EpisodeReport, Observation};
+use crate::{Action, EpisodeReport, JoinRequest, Observation, RunInfo};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -60,6 +60,17 @@ impl RunServices {
                 .subscriber_builder()
                 .create()
                 .map_err(|e| self.port_err(CONTROL, "creating the subscriber", e))?,
+            join: self
+                .join
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(JOIN, "creating the subscriber", e))?,
+            run_info: self
+                .run_info
+                .publisher_builder()
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| self.port_err(RUN_INFO, "creating the publisher", e))?,
             wake_agents: self.notifier(&self.wake_agents, WAKE_AGENTS)?,
             wake_supervisor: self.notifier(&self.wake_supervisor, WAKE_SUPERVISOR)?,
             waiter: self.waiter(&self.wake_world, WAKE_WORLD)?,
@@ -72,6 +83,17 @@ impl RunServices {
     pub fn into_agent(self) -> Result<AgentPorts, TransportError> {
         let waiter = self.waiter(&self.wake_agents, WAKE_AGENTS)?;
         Ok(AgentPorts {
+            run_info: self
+                .run_info
+                .subscriber_builder()
+                .create()
+                .map_err(|e| self.port_err(RUN_INFO, "creating the subscriber", e))?,
+            join: self
+                .join
+                .publisher_builder()
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| self.port_err(JOIN, "creating the publisher", e))?,
             observations: self
                 .observations
                 .subscriber_builder()
@@ -168,6 +190,8 @@ pub struct WorldPorts {
     actions: Subscriber<Ipc, Action, ()>,
     episodes: Publisher<Ipc, EpisodeReport, ()>,
     control: Subscriber<Ipc, Control, ()>,
+    join: Subscriber<Ipc, JoinRequest, ()>,
+    run_info: Publisher<Ipc, RunInfo, ()>,
     wake_agents: Notifier<Ipc>,
     wake_supervisor: Notifier<Ipc>,
     waiter: Waiter,
@@ -216,6 +240,26 @@ impl WorldPorts {
     pub fn try_control(&self) -> Result<Option<Control>, TransportError> {
         let sample = self.control.receive().map_err(|e| self.err(CONTROL, "receiving", e))?;
         Ok(sample.map(|s| *s))
+    }
+
+    /// The next join request, if any.
+    pub fn try_join(&self) -> Result<Option<JoinRequest>, TransportError> {
+        let sample = self.join.receive().map_err(|e| self.err(JOIN, "receiving", e))?;
+        Ok(sample.map(|s| *s))
+    }
+
+    /// Publishes the run's description (kept as history for agents that attach later).
+    pub fn publish_run_info(&self, info: &RunInfo) -> Result<(), TransportError> {
+        self.run_info.send_copy(*info).map_err(|e| self.err(RUN_INFO, "sending", e))?;
+        Ok(())
+    }
+
+    /// Hands the run's description to agents that subscribed since it was published;
+    /// iceoryx2 delivers history only when the publisher updates its connections.
+    pub fn serve_run_info(&self) -> Result<(), TransportError> {
+        self.run_info
+            .update_connections()
+            .map_err(|e| self.err(RUN_INFO, "updating connections", e))
     }
 
     /// Hands the newest observation (history) to agents that subscribed since the last
@@ -298,6 +342,8 @@ impl WorldPorts {
 
 /// An agent's side: reads observations, publishes actions.
 pub struct AgentPorts {
+    run_info: Subscriber<Ipc, RunInfo, ()>,
+    join: Publisher<Ipc, JoinRequest, ()>,
     observations: Subscriber<Ipc, Observation, ()>,
     actions: Publisher<Ipc, Action, ()>,
     wake_world: Notifier<Ipc>,
@@ -311,6 +357,28 @@ impl AgentPorts {
         self.observations
             .receive()
             .map_err(|e| port_error(&self.services.run.run_id, OBSERVATIONS, "receiving", e))
+    }
+
+    pub fn run_id(&self) -> &str {
+        &self.services.run.run_id
+    }
+
+    /// Asks the world for a place in the barrier and wakes it.
+    pub fn send_join(&self, request: &JoinRequest) -> Result<(), TransportError> {
+        let run = &self.services.run.run_id;
+        self.join.send_copy(*request).map_err(|e| port_error(run, JOIN, "sending", e))?;
+        self.wake_world.notify().map_err(|e| port_error(run, WAKE_WORLD, "notifying", e))?;
+        Ok(())
+    }
+
+    /// The run's description, if it has arrived (the world hands it over when it answers a
+    /// join request).
+    pub fn try_run_info(&self) -> Result<Option<RunInfo>, TransportError> {
+        let sample = self
+            .run_info
+            .receive()
+            .map_err(|e| port_error(&self.services.run.run_id, RUN_INFO, "receiving", e))?;
+        Ok(sample.map(|s| *s))
     }
 
     /// Answers a round and wakes the world.

@@ -5,9 +5,9 @@ use super::{
     WAKE_SUPERVISOR, WAKE_WORLD,
 };
 use crate::limits::MAX_AGENTS;
-use crate::services::{self, ACTIONS, CONTROL, EPISODES, OBSERVATIONS};
+use crate::services::{self, ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
-use crate::{Action, EpisodeReport, Observation};
+use crate::{Action, EpisodeReport, JoinRequest, Observation, RunInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::{EventCreateError, EventOpenError};
 use iceoryx2::service::builder::publish_subscribe::{
@@ -41,8 +41,9 @@ struct PubSubQos {
 /// World -> agents. Safe overflow: a hung agent must never block the world; a live agent
 /// reads every round before the next one exists. History 1 lets an agent that attaches late
 /// read the current round (delivered on the world's next publish or `serve_late_joiners`).
+/// One publisher: while the world lives, no other process can publish observations.
 const OBSERVATIONS_QOS: PubSubQos = PubSubQos {
-    publishers: 1 + SPARE,
+    publishers: 1,
     subscribers: MAX_AGENTS + SPARE,
     buffer: 2,
     history: 1,
@@ -62,7 +63,7 @@ const ACTIONS_QOS: PubSubQos = PubSubQos {
 /// publisher that waits (bounded by `report_timeout`) when the supervisor falls behind. Few
 /// subscribers, since every one of them must drain or the world stalls.
 const EPISODES_QOS: PubSubQos = PubSubQos {
-    publishers: 1 + 1,
+    publishers: 1,
     subscribers: 1 + 1,
     buffer: EPISODE_BUFFER,
     history: 0,
@@ -74,6 +75,23 @@ const CONTROL_QOS: PubSubQos = PubSubQos {
     subscribers: 1 + SPARE,
     buffer: 4,
     history: 0,
+    safe_overflow: true,
+};
+
+/// Agents -> world: join requests. Every agent sends one when it starts.
+const JOIN_QOS: PubSubQos = PubSubQos {
+    publishers: MAX_AGENTS + SPARE,
+    subscribers: 1,
+    buffer: 4,
+    history: 0,
+    safe_overflow: true,
+};
+/// World -> agents: the run's description, once, with history for agents that attach later.
+const RUN_INFO_QOS: PubSubQos = PubSubQos {
+    publishers: 1,
+    subscribers: MAX_AGENTS + 1 + SPARE,
+    buffer: 1,
+    history: 1,
     safe_overflow: true,
 };
 
@@ -129,6 +147,8 @@ pub struct RunServices {
     pub(super) actions: publish_subscribe::PortFactory<Ipc, Action, ()>,
     pub(super) episodes: publish_subscribe::PortFactory<Ipc, EpisodeReport, ()>,
     pub(super) control: publish_subscribe::PortFactory<Ipc, Control, ()>,
+    pub(super) join: publish_subscribe::PortFactory<Ipc, JoinRequest, ()>,
+    pub(super) run_info: publish_subscribe::PortFactory<Ipc, RunInfo, ()>,
     pub(super) wake_world: event::PortFactory<Ipc>,
     pub(super) wake_agents: event::PortFactory<Ipc>,
     pub(super) wake_supervisor: event::PortFactory<Ipc>,
@@ -149,6 +169,7 @@ impl RunServices {
         let act_name = ps(ACTIONS)?;
         let epi_name = ps(EPISODES)?;
         let ctl_name = ps(CONTROL)?;
+        let (join_name, info_name) = (ps(JOIN)?, ps(RUN_INFO)?);
         let (ww, wa, wsup) = (ps(WAKE_WORLD)?, ps(WAKE_AGENTS)?, ps(WAKE_SUPERVISOR)?);
         let created = |name: &ServiceName, e: ServiceFailure| e.into_error(run, name);
         Ok(RunServices {
@@ -164,6 +185,12 @@ impl RunServices {
             control: pubsub::<Control>(node, &ctl_name, &CONTROL_QOS)
                 .create()
                 .map_err(|e| created(&ctl_name, e.into()))?,
+            join: pubsub::<JoinRequest>(node, &join_name, &JOIN_QOS)
+                .create()
+                .map_err(|e| created(&join_name, e.into()))?,
+            run_info: pubsub::<RunInfo>(node, &info_name, &RUN_INFO_QOS)
+                .create()
+                .map_err(|e| created(&info_name, e.into()))?,
             wake_world: wake(node, &ww, &WAKE_WORLD_QOS)
                 .create()
                 .map_err(|e| created(&ww, e.into()))?,
@@ -188,6 +215,7 @@ impl RunServices {
         let ps = |what: &str| service_name(id, what);
         let (obs_name, act_name, epi_name, ctl_name) =
             (ps(OBSERVATIONS)?, ps(ACTIONS)?, ps(EPISODES)?, ps(CONTROL)?);
+        let (join_name, info_name) = (ps(JOIN)?, ps(RUN_INFO)?);
         let (ww, wa, wsup) = (ps(WAKE_WORLD)?, ps(WAKE_AGENTS)?, ps(WAKE_SUPERVISOR)?);
         Ok(RunServices {
             observations: retry(run, &obs_name, deadline, || {
@@ -201,6 +229,12 @@ impl RunServices {
             })?,
             control: retry(run, &ctl_name, deadline, || {
                 pubsub::<Control>(node, &ctl_name, &CONTROL_QOS).open()
+            })?,
+            join: retry(run, &join_name, deadline, || {
+                pubsub::<JoinRequest>(node, &join_name, &JOIN_QOS).open()
+            })?,
+            run_info: retry(run, &info_name, deadline, || {
+                pubsub::<RunInfo>(node, &info_name, &RUN_INFO_QOS).open()
             })?,
             wake_world: retry(run, &ww, deadline, || wake(node, &ww, &WAKE_WORLD_QOS).open())?,
             wake_agents: retry(run, &wa, deadline, || wake(node, &wa, &WAKE_AGENTS_QOS).open())?,

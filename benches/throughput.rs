@@ -1,0 +1,483 @@
+//! The product's throughput against the raw barrier, in one invocation so that the ratios
+//! are meaningful on a noisy machine: the raw iceoryx2 lockstep barrier (world + N agents,
+//! no simulation work, the product's default waiting strategy; `common/raw_barrier.rs`), the
+//! real `supervisor` over shared memory (`--transport shm`) and in one process
+//! (`--transport inproc`), each at 1 and 4 trials. Repetitions are interleaved and the median
+//! is reported.
+//!
+//! `cargo bench --bench throughput -- [--uavs N].. [--scenario S] [--seconds S] [--repeats K]`
+//! prints `throughput what=...` lines on stdout, one per configuration, then
+//! `throughput ratio ...` lines; each single run is logged on stderr. A product run trains
+//! for a calibrated number of `--episodes` (about `--seconds` of work) with
+//! `--eval-episodes 0`: the greedy evaluation's length depends on how well each trial
+//! learned (an untrained trial runs every episode to the tick cap), which would make the
+//! work neither proportional to `--episodes` nor equal across trials. Start-up and shutdown
+//! are measured by a run of one episode and subtracted: `rounds_per_s` is
+//! (rounds - rounds of the one-episode run) / (wall - its wall), from `summary.json`;
+//! `summary_rounds_per_s` is the product's own figure, start-up included.
+//!
+//! A scenario with fewer routes than `--uavs` is skipped. Without `--bench` (as under
+//! `cargo test --all-targets`) it does one short smoke run of every kind instead.
+
+#[path = "common/raw_barrier.rs"]
+mod raw_barrier;
+
+use flockstep_proto::transport::{leftover_files, WaitPolicy};
+use flockstep_proto::MAX_AGENTS;
+use flockstep_world::Scenario;
+use raw_barrier::{children_cpu_us, load1, measure, Error, Measurement};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// The trial counts measured for each transport.
+const TRIALS: [usize; 2] = [1, 4];
+/// Training episodes of a smoke run (no calibration).
+const SMOKE_EPISODES: u64 = 20;
+/// Episodes of the first calibration run; each next one has 4 times more.
+const FIRST_PROBE: u64 = 64;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = raw_barrier::run_child(&args).unwrap_or_else(|| parent(&args));
+    if let Err(e) = result {
+        eprintln!("throughput: {e}");
+        std::process::exit(1);
+    }
+}
+
+struct Options {
+    /// `--bench` given: measure; otherwise a smoke run.
+    full: bool,
+    uavs: Vec<usize>,
+    /// Passed to the supervisor as `--scenario` (None: its default for the number of UAVs).
+    scenario: Option<String>,
+    seconds: f64,
+    repeats: usize,
+}
+
+impl Options {
+    fn parse(args: &[String]) -> Result<Options, Error> {
+        // `cargo bench` passes `--bench`; `cargo test --all-targets` runs this binary without.
+        let full = args.iter().any(|a| a == "--bench");
+        let mut options = Options {
+            full,
+            uavs: Vec::new(),
+            scenario: None,
+            seconds: if full { 5.0 } else { 0.2 },
+            repeats: if full { 3 } else { 1 },
+        };
+        let mut it = args.iter();
+        while let Some(arg) = it.next() {
+            let mut value = || it.next().ok_or_else(|| format!("{arg} needs a value"));
+            match arg.as_str() {
+                "--uavs" => options.uavs.push(value()?.parse()?),
+                "--scenario" => options.scenario = Some(value()?.clone()),
+                "--seconds" => options.seconds = value()?.parse()?,
+                "--repeats" => options.repeats = value()?.parse::<usize>()?.max(1),
+                // Other harness flags mean nothing here.
+                _ => {}
+            }
+        }
+        if options.uavs.is_empty() {
+            options.uavs.push(2);
+        }
+        if let Some(n) = options.uavs.iter().find(|&&n| n == 0 || n > MAX_AGENTS) {
+            return Err(format!("--uavs {n}: must be 1..={MAX_AGENTS}").into());
+        }
+        Ok(options)
+    }
+}
+
+fn parent(args: &[String]) -> Result<(), Error> {
+    let options = Options::parse(args)?;
+    let mut bench = Bench::new(options.full)?;
+    for &uavs in &options.uavs {
+        let scenario = options.scenario.clone().unwrap_or_else(|| default_scenario(uavs).into());
+        let routes = Scenario::resolve(&scenario)
+            .map_err(|e| format!("--scenario {scenario}: {e}"))?
+            .n_routes();
+        if routes < uavs {
+            println!(
+                "throughput what=skipped uavs={uavs} scenario={scenario} routes={routes} \
+                 reason=too-few-routes"
+            );
+            continue;
+        }
+        compare(&mut bench, &options, uavs, &scenario)?;
+    }
+    Ok(())
+}
+
+/// The supervisor's own default (`flockstep_supervisor::config::default_scenario`), spelled
+/// out for the skip check and the output lines.
+fn default_scenario(uavs: usize) -> &'static str {
+    if uavs == 1 {
+        "s2"
+    } else {
+        "s3"
+    }
+}
+
+/// Measures every configuration for `uavs` agents, interleaved, and prints the medians and
+/// the ratios.
+fn compare(bench: &mut Bench, options: &Options, uavs: usize, scenario: &str) -> Result<(), Error> {
+    let configs: Vec<Config> = [Transport::Shm, Transport::Inproc]
+        .into_iter()
+        .flat_map(|transport| {
+            TRIALS.map(|trials| Config { transport, uavs, trials, scenario: scenario.into() })
+        })
+        .collect();
+    let episodes = configs
+        .iter()
+        .map(
+            |c| if options.full { bench.calibrate(c, options.seconds) } else { Ok(SMOKE_EPISODES) },
+        )
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut raw = Vec::new();
+    let mut product: Vec<Vec<Product>> = configs.iter().map(|_| Vec::new()).collect();
+    for repeat in 0..options.repeats {
+        let run_id = format!("tpb{}-{uavs}-{repeat}", std::process::id());
+        let m = measure(&run_id, uavs, WaitPolicy::default(), options.seconds)?;
+        eprintln!("throughput run what=raw-barrier agents={uavs} rounds_per_s={:.0}", m.rate());
+        raw.push(m);
+        for ((config, &episodes), runs) in configs.iter().zip(&episodes).zip(&mut product) {
+            let startup = bench.run(config, 1)?;
+            let run = bench.run(config, episodes)?;
+            let p = Product::new(episodes, startup, run)?;
+            eprintln!(
+                "throughput run what={} uavs={uavs} trials={} rounds_per_s={:.0} \
+                 env_steps_per_s={:.0} startup_s={:.3}",
+                config.transport.name(),
+                config.trials,
+                p.rounds_per_s(),
+                p.env_steps_per_s(),
+                p.startup.wall
+            );
+            runs.push(p);
+        }
+    }
+    raw.sort_by(|a, b| a.rate().total_cmp(&b.rate()));
+    print_raw(&raw, uavs, options);
+    let medians: Vec<Product> = product
+        .into_iter()
+        .zip(&configs)
+        .map(|(mut runs, config)| {
+            runs.sort_by(|a, b| a.rounds_per_s().total_cmp(&b.rounds_per_s()));
+            print_product(&runs, config);
+            runs.swap_remove(runs.len() / 2)
+        })
+        .collect();
+    print_ratios(&raw[raw.len() / 2], &configs, &medians, options);
+    Ok(())
+}
+
+fn print_raw(sorted: &[Measurement], uavs: usize, options: &Options) {
+    let median = &sorted[sorted.len() / 2];
+    let policy = WaitPolicy::default();
+    println!(
+        "throughput what=raw-barrier agents={uavs} spins={} yields={} rounds_per_s={:.0} \
+         min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.1} seconds={} \
+         repeats={} load1={:.2} leftover_files={}",
+        policy.spins,
+        policy.yields,
+        median.rate(),
+        sorted[0].rate(),
+        sorted[sorted.len() - 1].rate(),
+        median.p50_us,
+        median.p99_us,
+        median.cpu_us / median.rounds.max(1) as f64,
+        options.seconds,
+        options.repeats,
+        median.load1,
+        sorted.iter().map(|m| m.leftover).sum::<usize>(),
+    );
+}
+
+fn print_product(sorted: &[Product], config: &Config) {
+    let median = &sorted[sorted.len() / 2];
+    let run = &median.run;
+    println!(
+        "throughput what={} uavs={} trials={} scenario={} episodes={} rounds={} env_steps={} \
+         rounds_per_s={:.0} env_steps_per_s={:.0} min={:.0} max={:.0} \
+         summary_rounds_per_s={:.0} summary_env_steps_per_s={:.0} wall_s={:.3} startup_s={:.3} \
+         startup_process_s={:.3} process_s={:.3} cpu_us_per_round={:.2} occupancy={:.3} \
+         repeats={} load1={:.2} leftover_files={}",
+        config.transport.name(),
+        config.uavs,
+        config.trials,
+        config.scenario,
+        median.episodes,
+        run.rounds,
+        run.env_steps,
+        median.rounds_per_s(),
+        median.env_steps_per_s(),
+        sorted[0].rounds_per_s(),
+        sorted[sorted.len() - 1].rounds_per_s(),
+        run.rounds as f64 / run.wall,
+        run.env_steps as f64 / run.wall,
+        run.wall,
+        median.startup.wall,
+        median.startup.process,
+        run.process,
+        median.cpu_us_per_round(),
+        run.env_steps as f64 / (run.rounds * (config.trials * config.uavs) as u64).max(1) as f64,
+        sorted.len(),
+        run.load1,
+        sorted.iter().map(|p| p.startup.leftover + p.run.leftover).sum::<usize>(),
+    );
+}
+
+/// The ratios the issue asks for, from the medians of this invocation.
+fn print_ratios(raw: &Measurement, configs: &[Config], medians: &[Product], options: &Options) {
+    let find = |transport: Transport, trials: usize| {
+        let i = configs
+            .iter()
+            .position(|c| c.transport == transport && c.trials == trials)
+            .expect("every transport is measured at every trial count");
+        &medians[i]
+    };
+    let config = &configs[0];
+    println!(
+        "throughput summary uavs={} scenario={} repeats={} seconds={} full={}",
+        config.uavs, config.scenario, options.repeats, options.seconds, options.full
+    );
+    let ratio = |name: &str, trials: String, value: f64, target: Option<f64>| {
+        let target = target.map_or(String::new(), |t| {
+            format!(" target={t} met={}", if value >= t { "yes" } else { "no" })
+        });
+        println!(
+            "throughput ratio name={name} uavs={} trials={trials} value={value:.3}{target}",
+            config.uavs
+        );
+    };
+    for trials in TRIALS {
+        let shm = find(Transport::Shm, trials);
+        let value = shm.rounds_per_s() / raw.rate();
+        ratio("shm_rounds_vs_raw_barrier", trials.to_string(), value, Some(0.8));
+    }
+    let [one, four] = TRIALS.map(|trials| find(Transport::Shm, trials));
+    let trials = format!("{}/{}", TRIALS[1], TRIALS[0]);
+    ratio(
+        "shm_env_steps_trials",
+        trials.clone(),
+        four.env_steps_per_s() / one.env_steps_per_s(),
+        Some(3.5),
+    );
+    ratio("shm_rounds_trials", trials, four.rounds_per_s() / one.rounds_per_s(), None);
+    for trials in TRIALS {
+        let (inproc, shm) = (find(Transport::Inproc, trials), find(Transport::Shm, trials));
+        let t = trials.to_string();
+        ratio("inproc_vs_shm_rounds", t.clone(), inproc.rounds_per_s() / shm.rounds_per_s(), None);
+        ratio("inproc_vs_shm_env_steps", t, inproc.env_steps_per_s() / shm.env_steps_per_s(), None);
+    }
+    let inproc = find(Transport::Inproc, TRIALS[1]);
+    println!(
+        "throughput target name=inproc_env_steps_per_s uavs={} trials={} value={:.0} \
+         target=5000000 met={}",
+        config.uavs,
+        TRIALS[1],
+        inproc.env_steps_per_s(),
+        if inproc.env_steps_per_s() >= 5e6 { "yes" } else { "no" }
+    );
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Transport {
+    Shm,
+    Inproc,
+}
+
+impl Transport {
+    fn name(self) -> &'static str {
+        match self {
+            Transport::Shm => "shm",
+            Transport::Inproc => "inproc",
+        }
+    }
+}
+
+/// One configuration of the product.
+struct Config {
+    transport: Transport,
+    uavs: usize,
+    trials: usize,
+    scenario: String,
+}
+
+/// What one supervisor run reported.
+struct Run {
+    rounds: u64,
+    env_steps: u64,
+    /// `wall_seconds` of `summary.json`: from before the processes start to after they exit.
+    wall: f64,
+    /// The supervisor process from exec to exit, as this bench saw it.
+    process: f64,
+    /// CPU of the supervisor and every process it waited for.
+    cpu_us: f64,
+    /// Files of the run left in shared memory after the supervisor exited.
+    leftover: usize,
+    load1: f64,
+}
+
+/// A run and the one-episode run measured just before it, whose figures are subtracted.
+struct Product {
+    episodes: u64,
+    startup: Run,
+    run: Run,
+}
+
+impl Product {
+    fn new(episodes: u64, startup: Run, run: Run) -> Result<Product, Error> {
+        // Both runs are deterministic and start alike, so only a misconfiguration can give
+        // the longer run no more rounds.
+        if run.rounds <= startup.rounds {
+            return Err(format!(
+                "a run of {episodes} episodes has {} rounds, the one-episode run {}",
+                run.rounds, startup.rounds
+            )
+            .into());
+        }
+        Ok(Product { episodes, startup, run })
+    }
+
+    /// The time of the rounds beyond the one-episode run; only a smoke run is short enough
+    /// for noise to make it vanish.
+    fn seconds(&self) -> f64 {
+        (self.run.wall - self.startup.wall).max(1e-6)
+    }
+
+    fn rounds_per_s(&self) -> f64 {
+        (self.run.rounds - self.startup.rounds) as f64 / self.seconds()
+    }
+
+    fn env_steps_per_s(&self) -> f64 {
+        self.run.env_steps.saturating_sub(self.startup.env_steps) as f64 / self.seconds()
+    }
+
+    fn cpu_us_per_round(&self) -> f64 {
+        (self.run.cpu_us - self.startup.cpu_us) / (self.run.rounds - self.startup.rounds) as f64
+    }
+}
+
+/// Runs the supervisor that cargo built for this bench.
+struct Bench {
+    supervisor: PathBuf,
+    /// Results directories of the runs, removed on drop.
+    out: tempfile::TempDir,
+    runs: usize,
+}
+
+impl Bench {
+    /// Checks, when measuring, that the supervisor is the optimised build of this invocation.
+    fn new(full: bool) -> Result<Bench, Error> {
+        let supervisor = PathBuf::from(env!("CARGO_BIN_EXE_supervisor"));
+        // This bench is `target/<profile>/deps/throughput-<hash>`, the binaries
+        // `target/<profile>/<name>`: the same directory means the same profile.
+        let me = std::env::current_exe()?;
+        let same_profile = me.parent().and_then(Path::parent) == supervisor.parent();
+        let profile = supervisor.parent().and_then(Path::file_name).unwrap_or_default();
+        println!(
+            "throughput what=setup supervisor={} profile={} debug_assertions={} same_profile={}",
+            supervisor.display(),
+            profile.to_string_lossy(),
+            cfg!(debug_assertions),
+            same_profile
+        );
+        if full && (cfg!(debug_assertions) || !same_profile) {
+            return Err(format!(
+                "{} is not the optimised build of this bench ({}): run `cargo bench`",
+                supervisor.display(),
+                me.display()
+            )
+            .into());
+        }
+        Ok(Bench { supervisor, out: tempfile::tempdir()?, runs: 0 })
+    }
+
+    /// One supervisor run of `config` training `episodes` episodes per trial.
+    fn run(&mut self, config: &Config, episodes: u64) -> Result<Run, Error> {
+        self.runs += 1;
+        let run_id = format!("tp{}-{}", std::process::id(), self.runs);
+        let out = self.out.path().join(&run_id);
+        let mut command = Command::new(&self.supervisor);
+        command
+            .args(["--transport", config.transport.name(), "--quiet", "--run-id", &run_id])
+            .args(["--scenario", &config.scenario])
+            .args(["--uavs", &config.uavs.to_string()])
+            .args(["--trials", &config.trials.to_string()])
+            .args(["--episodes", &episodes.to_string(), "--eval-episodes", "0"])
+            .arg("--out")
+            .arg(&out);
+        let load1 = load1();
+        let cpu_before = children_cpu_us();
+        let started = Instant::now();
+        let output = command.output()?;
+        let process = started.elapsed().as_secs_f64();
+        let cpu_us = children_cpu_us() - cpu_before;
+        if !output.status.success() {
+            return Err(format!(
+                "{command:?}: {}\nstdout: {}\nstderr: {}",
+                output.status,
+                String::from_utf8_lossy(&output.stdout),
+                String::from_utf8_lossy(&output.stderr)
+            )
+            .into());
+        }
+        let path = out.join("summary.json");
+        let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)?;
+        let field = |name: &str| {
+            summary.get(name).ok_or_else(|| format!("{} lacks {name}", path.display()))
+        };
+        if field("complete")?.as_bool() != Some(true) {
+            return Err(format!("{command:?}: the run is not complete ({})", path.display()).into());
+        }
+        let number = |name: &str| -> Result<f64, Error> {
+            Ok(field(name)?.as_f64().ok_or_else(|| format!("{}: {name}", path.display()))?)
+        };
+        let run = Run {
+            rounds: number("rounds")? as u64,
+            env_steps: number("env_steps")? as u64,
+            wall: number("wall_seconds")?,
+            process,
+            cpu_us,
+            leftover: leftover_files(&run_id)?.len(),
+            load1,
+        };
+        // The results of a long run are large; keep the temporary directory small.
+        std::fs::remove_dir_all(&out)?;
+        Ok(run)
+    }
+
+    /// The number of training episodes for about `seconds` of work (start-up excluded):
+    /// runs 4 times more episodes each time until a run takes an eighth of that, then
+    /// extrapolates with the time per episode between the last two runs (episodes get
+    /// shorter as the UAVs learn, so the last stretch is the best guess for what follows).
+    fn calibrate(&mut self, config: &Config, seconds: f64) -> Result<u64, Error> {
+        let startup = self.run(config, 1)?.wall;
+        let mut previous = (0.0, 0.0);
+        let mut episodes = FIRST_PROBE;
+        loop {
+            let took = (self.run(config, episodes)?.wall - startup).max(1e-3);
+            if took >= seconds / 8.0 {
+                let (e, t) = previous;
+                let per_episode = if took > t { (took - t) / (episodes as f64 - e) } else { 0.0 };
+                // Without a usable slope (noise), scale the whole run.
+                let per_episode =
+                    if per_episode > 0.0 { per_episode } else { took / episodes as f64 };
+                let target = episodes as f64 + (seconds - took).max(0.0) / per_episode;
+                eprintln!(
+                    "throughput calibrate what={} uavs={} trials={} probe_episodes={episodes} \
+                     probe_s={took:.3} us_per_episode={:.1} episodes={target:.0}",
+                    config.transport.name(),
+                    config.uavs,
+                    config.trials,
+                    per_episode * 1e6
+                );
+                return Ok(target.round() as u64);
+            }
+            previous = (episodes as f64, took);
+            episodes *= 4;
+        }
+    }
+}
