@@ -65,7 +65,7 @@ impl Options {
             uavs: Vec::new(),
             scenario: None,
             seconds: if full { 5.0 } else { 0.2 },
-            repeats: if full { 3 } else { 1 },
+            repeats: if full { 5 } else { 1 },
         };
         let mut it = args.iter();
         while let Some(arg) = it.next() {
@@ -120,7 +120,7 @@ fn default_scenario(uavs: usize) -> &'static str {
 }
 
 /// Measures every configuration for `uavs` agents, interleaved, and prints the medians and
-/// the ratios.
+/// the figures of merit.
 fn compare(bench: &mut Bench, options: &Options, uavs: usize, scenario: &str) -> Result<(), Error> {
     let configs: Vec<Config> = [Transport::Shm, Transport::Inproc]
         .into_iter()
@@ -134,50 +134,80 @@ fn compare(bench: &mut Bench, options: &Options, uavs: usize, scenario: &str) ->
             |c| if options.full { bench.calibrate(c, options.seconds) } else { Ok(SMOKE_EPISODES) },
         )
         .collect::<Result<Vec<_>, _>>()?;
-    let mut raw = Vec::new();
-    let mut product: Vec<Vec<Product>> = configs.iter().map(|_| Vec::new()).collect();
+    let mut repetitions = Vec::new();
     for repeat in 0..options.repeats {
         let run_id = format!("tpb{}-{uavs}-{repeat}", std::process::id());
-        let m = measure(&run_id, uavs, WaitPolicy::default(), options.seconds)?;
-        eprintln!("throughput run what=raw-barrier agents={uavs} rounds_per_s={:.0}", m.rate());
-        raw.push(m);
-        for ((config, &episodes), runs) in configs.iter().zip(&episodes).zip(&mut product) {
+        let raw = measure(&run_id, uavs, WaitPolicy::default(), options.seconds)?;
+        eprintln!("throughput run what=raw-barrier agents={uavs} rounds_per_s={:.0}", raw.rate());
+        let mut product = Vec::new();
+        for (config, &episodes) in configs.iter().zip(&episodes) {
             let startup = bench.run(config, 1)?;
-            let run = bench.run(config, episodes)?;
-            let p = Product::new(episodes, startup, run)?;
+            let p = Product::new(episodes, startup, bench.run(config, episodes)?)?;
             eprintln!(
                 "throughput run what={} uavs={uavs} trials={} rounds_per_s={:.0} \
-                 env_steps_per_s={:.0} startup_s={:.3}",
+                 env_steps_per_s={:.0} seconds={:.3} startup_s={:.3}",
                 config.transport.name(),
                 config.trials,
                 p.rounds_per_s(),
                 p.env_steps_per_s(),
+                p.run.wall,
                 p.startup.wall
             );
-            runs.push(p);
+            product.push(p);
         }
+        repetitions.push(Repetition { raw, product });
     }
+    let mut raw: Vec<&Measurement> = repetitions.iter().map(|r| &r.raw).collect();
     raw.sort_by(|a, b| a.rate().total_cmp(&b.rate()));
     print_raw(&raw, uavs, options);
-    let medians: Vec<Product> = product
-        .into_iter()
-        .zip(&configs)
-        .map(|(mut runs, config)| {
-            runs.sort_by(|a, b| a.rounds_per_s().total_cmp(&b.rounds_per_s()));
-            print_product(&runs, config);
-            runs.swap_remove(runs.len() / 2)
-        })
-        .collect();
-    print_ratios(&raw[raw.len() / 2], &configs, &medians, options);
+    for (i, config) in configs.iter().enumerate() {
+        let mut runs: Vec<&Product> = repetitions.iter().map(|r| &r.product[i]).collect();
+        runs.sort_by(|a, b| a.rounds_per_s().total_cmp(&b.rounds_per_s()));
+        print_product(&runs, config);
+    }
+    println!(
+        "throughput summary uavs={uavs} scenario={scenario} repeats={} seconds={} full={}",
+        options.repeats, options.seconds, options.full
+    );
+    // Each figure is computed within a repetition, whose runs follow each other closely and
+    // so share the machine's foreign load, and the median over the repetitions is reported.
+    let per_repetition: Vec<Vec<Figure>> =
+        repetitions.iter().map(|r| figures(r, &configs)).collect();
+    for (i, figure) in per_repetition[0].iter().enumerate() {
+        let mut values: Vec<f64> = per_repetition.iter().map(|f| f[i].value).collect();
+        values.sort_by(f64::total_cmp);
+        let target = figure.target.map_or(String::new(), |t| {
+            let met = if values[values.len() / 2] >= t { "yes" } else { "no" };
+            format!(" target={} met={met}", number(t))
+        });
+        println!(
+            "throughput {} name={} uavs={uavs} trials={} value={} min={} max={}{target}",
+            figure.kind,
+            figure.name,
+            figure.trials,
+            number(values[values.len() / 2]),
+            number(values[0]),
+            number(values[values.len() - 1]),
+        );
+    }
     Ok(())
 }
 
-fn print_raw(sorted: &[Measurement], uavs: usize, options: &Options) {
-    let median = &sorted[sorted.len() / 2];
+/// Ratios with 3 decimals, rates as integers.
+fn number(value: f64) -> String {
+    if value.abs() >= 1000.0 {
+        format!("{value:.0}")
+    } else {
+        format!("{value:.3}")
+    }
+}
+
+fn print_raw(sorted: &[&Measurement], uavs: usize, options: &Options) {
+    let median = sorted[sorted.len() / 2];
     let policy = WaitPolicy::default();
     println!(
         "throughput what=raw-barrier agents={uavs} spins={} yields={} rounds_per_s={:.0} \
-         min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.1} seconds={} \
+         min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.2} seconds={} \
          repeats={} load1={:.2} leftover_files={}",
         policy.spins,
         policy.yields,
@@ -194,8 +224,8 @@ fn print_raw(sorted: &[Measurement], uavs: usize, options: &Options) {
     );
 }
 
-fn print_product(sorted: &[Product], config: &Config) {
-    let median = &sorted[sorted.len() / 2];
+fn print_product(sorted: &[&Product], config: &Config) {
+    let median = sorted[sorted.len() / 2];
     let run = &median.run;
     println!(
         "throughput what={} uavs={} trials={} scenario={} episodes={} rounds={} env_steps={} \
@@ -228,58 +258,58 @@ fn print_product(sorted: &[Product], config: &Config) {
     );
 }
 
-/// The ratios the issue asks for, from the medians of this invocation.
-fn print_ratios(raw: &Measurement, configs: &[Config], medians: &[Product], options: &Options) {
+/// One interleaved repetition: the raw barrier, then every product configuration.
+struct Repetition {
+    raw: Measurement,
+    /// In the order of the configurations.
+    product: Vec<Product>,
+}
+
+/// A figure of merit the issue asks for, from one repetition.
+struct Figure {
+    /// `ratio` or `target` (an absolute rate).
+    kind: &'static str,
+    name: &'static str,
+    trials: String,
+    value: f64,
+    target: Option<f64>,
+}
+
+fn figures(repetition: &Repetition, configs: &[Config]) -> Vec<Figure> {
     let find = |transport: Transport, trials: usize| {
         let i = configs
             .iter()
             .position(|c| c.transport == transport && c.trials == trials)
             .expect("every transport is measured at every trial count");
-        &medians[i]
+        &repetition.product[i]
     };
-    let config = &configs[0];
-    println!(
-        "throughput summary uavs={} scenario={} repeats={} seconds={} full={}",
-        config.uavs, config.scenario, options.repeats, options.seconds, options.full
-    );
-    let ratio = |name: &str, trials: String, value: f64, target: Option<f64>| {
-        let target = target.map_or(String::new(), |t| {
-            format!(" target={t} met={}", if value >= t { "yes" } else { "no" })
-        });
-        println!(
-            "throughput ratio name={name} uavs={} trials={trials} value={value:.3}{target}",
-            config.uavs
-        );
-    };
+    let ratio = |name, trials, value, target| Figure { kind: "ratio", name, trials, value, target };
+    let mut figures = Vec::new();
     for trials in TRIALS {
-        let shm = find(Transport::Shm, trials);
-        let value = shm.rounds_per_s() / raw.rate();
-        ratio("shm_rounds_vs_raw_barrier", trials.to_string(), value, Some(0.8));
+        let value = find(Transport::Shm, trials).rounds_per_s() / repetition.raw.rate();
+        figures.push(ratio("shm_rounds_vs_raw_barrier", trials.to_string(), value, Some(0.8)));
     }
     let [one, four] = TRIALS.map(|trials| find(Transport::Shm, trials));
     let trials = format!("{}/{}", TRIALS[1], TRIALS[0]);
-    ratio(
-        "shm_env_steps_trials",
-        trials.clone(),
-        four.env_steps_per_s() / one.env_steps_per_s(),
-        Some(3.5),
-    );
-    ratio("shm_rounds_trials", trials, four.rounds_per_s() / one.rounds_per_s(), None);
+    let value = four.env_steps_per_s() / one.env_steps_per_s();
+    figures.push(ratio("shm_env_steps_trials", trials.clone(), value, Some(3.5)));
+    let value = four.rounds_per_s() / one.rounds_per_s();
+    figures.push(ratio("shm_rounds_trials", trials, value, None));
     for trials in TRIALS {
         let (inproc, shm) = (find(Transport::Inproc, trials), find(Transport::Shm, trials));
-        let t = trials.to_string();
-        ratio("inproc_vs_shm_rounds", t.clone(), inproc.rounds_per_s() / shm.rounds_per_s(), None);
-        ratio("inproc_vs_shm_env_steps", t, inproc.env_steps_per_s() / shm.env_steps_per_s(), None);
+        let value = inproc.rounds_per_s() / shm.rounds_per_s();
+        figures.push(ratio("inproc_vs_shm_rounds", trials.to_string(), value, None));
+        let value = inproc.env_steps_per_s() / shm.env_steps_per_s();
+        figures.push(ratio("inproc_vs_shm_env_steps", trials.to_string(), value, None));
     }
-    let inproc = find(Transport::Inproc, TRIALS[1]);
-    println!(
-        "throughput target name=inproc_env_steps_per_s uavs={} trials={} value={:.0} \
-         target=5000000 met={}",
-        config.uavs,
-        TRIALS[1],
-        inproc.env_steps_per_s(),
-        if inproc.env_steps_per_s() >= 5e6 { "yes" } else { "no" }
-    );
+    figures.push(Figure {
+        kind: "target",
+        name: "inproc_env_steps_per_s",
+        trials: TRIALS[1].to_string(),
+        value: find(Transport::Inproc, TRIALS[1]).env_steps_per_s(),
+        target: Some(5e6),
+    });
+    figures
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -79,3 +79,102 @@ pub fn read(path: &Path) -> Vec<u8> {
 pub fn repo_file(relative: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(relative)
 }
+
+/// Pids of the processes whose command line contains `needle` (e.g. a run id).
+pub fn pids_with(needle: &str) -> Vec<u32> {
+    let mut pids = Vec::new();
+    for entry in std::fs::read_dir("/proc").expect("/proc is readable").flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else { continue };
+        let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+        if cmdline.contains(needle) && pid != std::process::id() {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// Sends `signal` to `pid`.
+pub fn signal(pid: u32, signal: libc::c_int) {
+    // SAFETY: kill(2) with a pid we found; a process already gone is not an error here.
+    unsafe {
+        libc::kill(pid as libc::pid_t, signal);
+    }
+}
+
+/// Polls `condition` every 10 ms for at most `timeout`; panics with `what` if it never holds.
+pub fn wait_until(what: &str, timeout: std::time::Duration, mut condition: impl FnMut() -> bool) {
+    let start = std::time::Instant::now();
+    while !condition() {
+        assert!(start.elapsed() < timeout, "gave up after {timeout:?} waiting for {what}");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
+/// A spawned supervisor, waited for with a bound; killed (and the test failed) past it.
+pub struct Supervised {
+    pub cmd: Command,
+    pub child: std::process::Child,
+}
+
+impl Supervised {
+    pub fn start(args: &[&str]) -> Supervised {
+        let mut cmd = Command::new(SUPERVISOR);
+        cmd.args(args).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
+        let child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start the supervisor: {e}"));
+        Supervised { cmd, child }
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Waits for the exit, at most `timeout` (a deadlock fails the test with the output).
+    pub fn finish(mut self, timeout: std::time::Duration) -> (Output, String) {
+        let start = std::time::Instant::now();
+        loop {
+            if self.child.try_wait().expect("wait on the supervisor").is_some() {
+                break;
+            }
+            if start.elapsed() > timeout {
+                let _ = self.child.kill();
+                let out = self.child.wait_with_output().expect("collect output");
+                panic!(
+                    "the supervisor did not finish within {timeout:?} (deadlock?)\n{}",
+                    describe(&self.cmd, &out)
+                );
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let out = self.child.wait_with_output().expect("collect output");
+        let report = describe(&self.cmd, &out);
+        (out, report)
+    }
+}
+
+/// Parsed `episodes.csv`: (trial, agent, episode, start_tick, length, truncated) rows.
+pub fn episode_rows(out: &Path) -> Vec<[u64; 6]> {
+    let text = String::from_utf8(read(&out.join("episodes.csv"))).expect("UTF-8 CSV");
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("trial,agent,episode,start_tick,length,truncated"));
+    lines
+        .map(|line| {
+            let fields: Vec<u64> = line
+                .split(',')
+                .map(|f| f.parse().unwrap_or_else(|e| panic!("`{line}`: {e}")))
+                .collect();
+            fields.try_into().unwrap_or_else(|f| panic!("`{line}` has {} fields", Vec::len(&f)))
+        })
+        .collect()
+}
+
+/// Asserts that nothing of run `id` is left: no process, no shared-memory file.
+pub fn assert_nothing_left(id: &str) {
+    wait_until(
+        &format!("the processes of run {id} to exit"),
+        std::time::Duration::from_secs(10),
+        || pids_with(id).is_empty(),
+    );
+    let left = flockstep_proto::transport::leftover_files(id).expect("list the run's files");
+    assert!(left.is_empty(), "run {id} left files behind: {left:?}");
+}

@@ -7,6 +7,8 @@ mod bt_tools;
 mod cli_errors;
 /// Same seed, same bytes; another seed, other bytes.
 mod determinism;
+/// Attach, dead agents, restarts, Ctrl-C, a killed world, a rogue publisher.
+mod faults;
 /// Spawns binaries and reports failures with the command, status, stdout and stderr.
 mod harness;
 /// The thesis's learning results in-process: optima reached, communication helps.

@@ -2,6 +2,8 @@
 
 /// A small map with two UAVs, two targets and facts, shared by the tests.
 mod common;
+/// Generated scenarios (`gen:...`): deterministic, valid, verified, clear refusals.
+mod generate;
 /// Refused maps: every error names `file:line:col` and what was expected.
 mod map_errors;
 /// The exact optimum of a memoryless UAV and the known-target bound.

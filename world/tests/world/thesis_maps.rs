@@ -76,5 +76,5 @@ fn the_builtin_maps_are_the_files_on_disk() {
         let by_path = dir.join(file).display().to_string();
         assert_eq!(Scenario::resolve(&by_path).expect("resolve a path").map(), builtin.map());
     }
-    assert!(Scenario::builtin("s4").is_none());
+    assert!(Scenario::builtin("s99").is_none());
 }

@@ -1,0 +1,338 @@
+//! Membership and faults (issue 4) with real processes: attach, SIGKILLed agents, restart
+//! from snapshots, Ctrl-C, a killed world, and a rogue publisher. Every wait is bounded; a
+//! run that does not finish in time fails the test as a deadlock.
+
+use crate::harness::{
+    assert_nothing_left, episode_rows, pids_with, read, run_id, scratch, signal, summary,
+    supervise, wait_until, Supervised, AGENT,
+};
+use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
+use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+const DEADLOCK: Duration = Duration::from_secs(120);
+
+/// A small deterministic generator for "random" kill times (the tests must be repeatable).
+struct Lcg(u64);
+
+impl Lcg {
+    fn below(&mut self, bound: u64) -> u64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (self.0 >> 33) % bound
+    }
+}
+
+fn run_args<'a>(id: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["--transport", "shm", "--run-id", id, "--out", out, "--quiet"];
+    args.extend_from_slice(extra);
+    args
+}
+
+#[test]
+fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
+    let dir = scratch();
+    let traces = dir.path().join("traces");
+    std::fs::create_dir_all(&traces).expect("trace dir");
+    let (id, out, trace_dir) =
+        (run_id("attach"), dir.path().display().to_string(), traces.display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &[
+            "--scenario",
+            "s4",
+            "--uavs",
+            "2",
+            "--episodes",
+            "6000",
+            "--trials",
+            "2",
+            "--seed",
+            "41",
+            "--trace-dir",
+            &trace_dir,
+        ],
+    ));
+    wait_until("the run's first agents", Duration::from_secs(30), || {
+        !pids_with(&format!("--run-id {id} --uav 2")).is_empty()
+    });
+    let mut attach = Command::new(AGENT);
+    attach.args(["--attach", &id, "--out", &out]);
+    let attached = attach.output().expect("run the attaching agent");
+    assert!(attached.status.success(), "{}", crate::harness::describe(&attach, &attached));
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let rows = episode_rows(dir.path());
+    for trial in 0..2 {
+        let third: Vec<&[u64; 6]> = rows.iter().filter(|r| r[0] == trial && r[1] == 3).collect();
+        assert!(
+            third.len() > 200,
+            "trial {trial}: UAV3 took part in only {} episodes",
+            third.len()
+        );
+        // Admitted at an episode boundary: its first episode starts when UAV1's does.
+        let first = third[0];
+        assert!(first[2] > 0, "UAV3 was there from the start: it did not attach");
+        let uav1 = rows
+            .iter()
+            .find(|r| r[0] == trial && r[1] == 1 && r[2] == first[2])
+            .expect("UAV1 row of that episode");
+        assert_eq!(uav1[3], first[3], "UAV3's first episode does not start at an episode boundary");
+        // It learns: its last episodes are shorter than its first ones.
+        let mean = |rs: &[&[u64; 6]]| rs.iter().map(|r| r[4] as f64).sum::<f64>() / rs.len() as f64;
+        let (head, tail) = (mean(&third[..100]), mean(&third[third.len() - 100..]));
+        assert!(tail < head, "trial {trial}: UAV3 did not learn ({head} -> {tail})");
+    }
+    // Its peers hear it: UAV1's communication state gains entries for route 3, which sit
+    // after UAV2's 5 entries (bits 10..20 of the first word).
+    let trace = String::from_utf8(read(&traces.join("uav1.trace.csv"))).expect("UTF-8");
+    let heard = trace.lines().skip(1).filter_map(|l| l.rsplit(',').next()).filter(|comm| {
+        comm.split('-')
+            .next()
+            .and_then(|w| u64::from_str_radix(w, 16).ok())
+            .is_some_and(|w| w >> 10 & 0x3ff != 0)
+    });
+    assert!(heard.count() > 100, "UAV1 never heard UAV3");
+    assert_nothing_left(&id);
+}
+
+#[test]
+fn sigkilled_agents_never_deadlock_the_survivors() {
+    let mut random = Lcg(7);
+    for attempt in 0..20 {
+        let dir = scratch();
+        let (id, out) = (run_id(&format!("kill{attempt}")), dir.path().display().to_string());
+        let run = Supervised::start(&run_args(
+            &id,
+            &out,
+            &[
+                "--scenario",
+                "s3",
+                "--uavs",
+                "2",
+                "--episodes",
+                "3000",
+                "--trials",
+                "1",
+                "--seed",
+                "51",
+            ],
+        ));
+        let victim = format!("--run-id {id} --uav 2");
+        wait_until("UAV2 to start", Duration::from_secs(30), || !pids_with(&victim).is_empty());
+        std::thread::sleep(Duration::from_millis(50 + random.below(600)));
+        for pid in pids_with(&victim) {
+            signal(pid, libc::SIGKILL);
+        }
+        let (status, report) = run.finish(DEADLOCK);
+        assert!(status.status.success(), "attempt {attempt}\n{report}");
+        let s = summary(dir.path());
+        assert_eq!(s["complete"], true, "attempt {attempt}: {s:#}");
+        let notes = s["notes"].to_string();
+        assert!(
+            notes.contains("UAV2 failed") && notes.contains("SIGKILL"),
+            "attempt {attempt}: the loss is not reported: {notes}"
+        );
+        let uav1 = episode_rows(dir.path()).iter().filter(|r| r[1] == 1).count();
+        assert_eq!(uav1, 3000, "attempt {attempt}: the survivor did not finish its budget");
+        assert_nothing_left(&id);
+    }
+}
+
+#[test]
+fn a_restarted_agent_goes_on_from_its_snapshot() {
+    let dir = scratch();
+    let (id, out) = (run_id("restart"), dir.path().display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &[
+            "--scenario",
+            "s3",
+            "--uavs",
+            "2",
+            "--episodes",
+            "12000",
+            "--trials",
+            "1",
+            "--seed",
+            "61",
+            "--restart",
+            "on-failure",
+            "--snapshot-every",
+            "200",
+        ],
+    ));
+    let snapshot = dir.path().join("qtables").join("uav1_trial0.bin");
+    wait_until("UAV1's snapshot after 3000 episodes", Duration::from_secs(60), || {
+        std::fs::read(&snapshot)
+            .ok()
+            .and_then(|b| flockstep_agents::snapshot::Snapshot::decode(&b).ok())
+            .is_some_and(|s| s.episodes >= 3000)
+    });
+    for pid in pids_with(&format!("--run-id {id} --uav 1 ")) {
+        signal(pid, libc::SIGKILL);
+    }
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let notes = summary(dir.path())["notes"].to_string();
+    assert!(notes.contains("UAV1 restarted"), "{notes}");
+    let uav1: Vec<[u64; 6]> = episode_rows(dir.path()).into_iter().filter(|r| r[1] == 1).collect();
+    let gap =
+        uav1.windows(2).position(|w| w[1][2] != w[0][2] + 1).expect("a gap where UAV1 was down");
+    let mean = |rs: &[[u64; 6]]| rs.iter().map(|r| r[4] as f64).sum::<f64>() / rs.len() as f64;
+    let (start, before, after) =
+        (mean(&uav1[..200]), mean(&uav1[gap - 200..gap]), mean(&uav1[gap + 1..gap + 201]));
+    assert!(
+        after < 2.0 * before && after < start / 2.0,
+        "restarted from scratch? first {start}, before the kill {before}, after {after}"
+    );
+    assert_nothing_left(&id);
+}
+
+#[test]
+fn ctrl_c_stops_cleanly_with_partial_results() {
+    let mut random = Lcg(11);
+    for attempt in 0..10 {
+        let dir = scratch();
+        let (id, out) = (run_id(&format!("int{attempt}")), dir.path().display().to_string());
+        let run = Supervised::start(&run_args(
+            &id,
+            &out,
+            &[
+                "--scenario",
+                "s3",
+                "--uavs",
+                "2",
+                "--episodes",
+                "50000",
+                "--trials",
+                "2",
+                "--seed",
+                "71",
+            ],
+        ));
+        std::thread::sleep(Duration::from_millis(100 + random.below(1500)));
+        signal(run.pid(), libc::SIGINT);
+        let (status, report) = run.finish(DEADLOCK);
+        assert_eq!(
+            status.status.code(),
+            Some(130),
+            "attempt {attempt}: Ctrl-C exits with 130\n{report}"
+        );
+        let s = summary(dir.path());
+        assert_eq!(s["complete"], false, "attempt {attempt}");
+        let rows = episode_rows(dir.path());
+        assert!(rows.len() < 200_000, "attempt {attempt}: the run was not stopped");
+        if s["rounds"].as_u64().unwrap_or(0) > 0 {
+            for name in ["uav1_trial0.bin", "uav2_trial1.bin"] {
+                let bytes = read(&dir.path().join("qtables").join(name));
+                flockstep_agents::snapshot::Snapshot::decode(&bytes)
+                    .unwrap_or_else(|e| panic!("attempt {attempt}: {name}: {e}"));
+            }
+        }
+        assert_nothing_left(&id);
+    }
+}
+
+#[test]
+fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
+    let dir = scratch();
+    let (id, out) = (run_id("worldkill"), dir.path().display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &[
+            "--scenario",
+            "s3",
+            "--uavs",
+            "2",
+            "--episodes",
+            "50000",
+            "--trials",
+            "2",
+            "--seed",
+            "81",
+        ],
+    ));
+    let world = format!("world --run-id {id}");
+    wait_until("episodes to be recorded", Duration::from_secs(30), || {
+        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 100)
+            && !pids_with(&world).is_empty()
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    for pid in pids_with(&world) {
+        signal(pid, libc::SIGKILL);
+    }
+    let killed = Instant::now();
+    let (status, report) = run.finish(DEADLOCK);
+    eprintln!("the supervisor exited {:?} after the world was killed", killed.elapsed());
+    assert_eq!(status.status.code(), Some(1), "{report}");
+    assert!(
+        String::from_utf8_lossy(&status.stderr).contains("the world process failed"),
+        "{report}"
+    );
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false);
+    assert!(!episode_rows(dir.path()).is_empty(), "the results collected so far are lost");
+    assert_nothing_left(&id);
+}
+
+#[test]
+fn a_rogue_publisher_is_rejected_and_changes_nothing() {
+    let (shm, inproc) = (scratch(), scratch());
+    let (id, out) = (run_id("rogue"), shm.path().display().to_string());
+    let args =
+        ["--scenario", "s3", "--uavs", "2", "--episodes", "2000", "--trials", "2", "--seed", "91"];
+    let run = Supervised::start(&run_args(&id, &out, &args));
+    let rogue_id = id.clone();
+    let rogue = std::thread::spawn(move || {
+        let ports = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
+            .and_then(RunServices::into_agent)
+            .expect("the rogue opens the run");
+        ports.send_join(&JoinRequest { nonce: 0, pid: 1, slot: 7 }).expect("send a join");
+        ports.send_join(&JoinRequest { nonce: 99, pid: 1, slot: ANY_SLOT }).expect("send a join");
+        let mut sent = 0;
+        let start = Instant::now();
+        while sent < 200 && start.elapsed() < Duration::from_secs(60) {
+            let Ok(Some(observation)) = ports.try_observation() else {
+                std::thread::sleep(Duration::from_millis(1));
+                continue;
+            };
+            let mut bad = Action::new(0);
+            bad.round = observation.round;
+            bad.n_trials = observation.n_trials;
+            match sent % 4 {
+                0 => bad.agent = 99,
+                1 => bad.n_trials = 999,
+                2 => bad.trials[0].flags.waypoint = 5000,
+                _ => {
+                    bad.trials[1].n_commands = 1;
+                    bad.trials[1].commands[0] = 77;
+                }
+            }
+            ports.publish_action(&bad).expect("publish a rogue action");
+            sent += 1;
+        }
+        sent
+    });
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let sent = rogue.join().expect("the rogue thread");
+    assert!(sent >= 50, "the rogue sent only {sent} messages");
+    let log =
+        String::from_utf8(read(&shm.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    assert!(
+        log.contains("dropped an invalid action") || log.contains("does not answer"),
+        "no rejection logged:\n{log}"
+    );
+    assert!(
+        log.contains("join refused") || log.contains("ignored a join request"),
+        "rogue joins not logged:\n{log}"
+    );
+    // Nothing the rogue sent changed the run: it equals the in-process twin byte for byte.
+    supervise(inproc.path(), &[&args[..], &["--transport", "inproc"]].concat());
+    assert_eq!(read(&shm.path().join("episodes.csv")), read(&inproc.path().join("episodes.csv")));
+    assert_nothing_left(&id);
+}
