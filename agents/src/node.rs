@@ -56,8 +56,8 @@ pub struct LearnerArgs {
     /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
-    /// Test aid, off by default: `crash-at-round=N` (abort), `hang-at-round=N` (stop
-    /// answering, still obey SIGTERM), `ignore-sigterm`.
+    /// Test aid, off by default, comma-separated: `crash-at-round=N` (abort),
+    /// `hang-at-round=N` (stop answering, still obey SIGTERM), `ignore-sigterm`.
     #[arg(long)]
     pub fault: Option<String>,
 }
@@ -172,9 +172,12 @@ fn serve(
     learner: &LearnerArgs,
     out: &Path,
 ) -> Result<()> {
-    let fault = learner.fault.as_deref().map(parse_fault).transpose()?;
+    let faults = learner
+        .fault
+        .as_deref()
+        .map_or(Ok(Vec::new()), |f| f.split(',').map(parse_fault).collect())?;
     let ports = RunServices::open(run)?.into_agent()?;
-    if fault == Some(Fault::IgnoreSigterm) {
+    if faults.contains(&Fault::IgnoreSigterm) {
         // SAFETY: setting a signal's disposition to "ignore".
         unsafe {
             libc::signal(libc::SIGTERM, libc::SIG_IGN);
@@ -215,10 +218,12 @@ fn serve(
         if observation.owners[slot] != nonce {
             bail!("the world dropped UAV{} from the run (presumed dead)", slot + 1);
         }
-        match fault {
-            Some(Fault::CrashAtRound(r)) if observation.round == r => std::process::abort(),
-            Some(Fault::HangAtRound(r)) if observation.round == r => hang(),
-            _ => {}
+        for fault in &faults {
+            match *fault {
+                Fault::CrashAtRound(r) if observation.round == r => std::process::abort(),
+                Fault::HangAtRound(r) if observation.round == r => hang(),
+                _ => {}
+            }
         }
         session
             .agent

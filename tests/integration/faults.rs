@@ -135,7 +135,7 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
             "attempt {attempt}: the loss is not reported: {notes}"
         );
         let uav1 = episode_rows(dir.path()).iter().filter(|r| r[1] == 1).count();
-        assert_eq!(uav1, 3000, "attempt {attempt}: the survivor did not finish its budget");
+        assert_eq!(uav1, 2000, "attempt {attempt}: the survivor did not finish its budget");
         assert_nothing_left(&id);
     }
 }
@@ -334,5 +334,41 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
     // Nothing the rogue sent changed the run: it equals the in-process twin byte for byte.
     supervise(inproc.path(), &[&args[..], &["--transport", "inproc"]].concat());
     assert_eq!(read(&shm.path().join("episodes.csv")), read(&inproc.path().join("episodes.csv")));
+    assert_nothing_left(&id);
+}
+
+#[test]
+fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
+    let dir = scratch();
+    let (id, out) = (run_id("hang"), dir.path().display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &[
+            "--scenario",
+            "s3",
+            "--uavs",
+            "2",
+            "--episodes",
+            "2000",
+            "--trials",
+            "1",
+            "--seed",
+            "95",
+            "--fault",
+            "2=hang-at-round=3000,ignore-sigterm",
+        ],
+    ));
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let log =
+        String::from_utf8(read(&dir.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    assert!(log.contains("silent past the deadline") && log.contains("uav=2"), "{log}");
+    let notes = summary(dir.path())["notes"].to_string();
+    assert!(
+        notes.contains("had to signal UAV2"),
+        "the ladder did not have to kill the hung agent: {notes}"
+    );
+    assert_eq!(episode_rows(dir.path()).iter().filter(|r| r[1] == 1).count(), 2000);
     assert_nothing_left(&id);
 }

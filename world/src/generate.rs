@@ -12,12 +12,12 @@
 //! | `cover` | routes that must see each target | 1 | 1..=uavs, or `all` |
 //! | `seed` | the generator's seed | 1 | u64 |
 //!
-//! The layout ([`layout`]): UAV k patrols sector k of the grid (a wedge from the centre to
+//! The layout (`generate/layout.rs`): UAV k patrols sector k of the grid (a wedge from the centre to
 //! one N-th of the rim, clockwise from the north-west corner) and inspects a central square
 //! from its own side; routes have 4..=12 waypoints about 3 cells apart, start `wp1 low N`
 //! where the patrol meets the rim. `X` cells are then drawn with probability `occlusion`
 //! on every cell but the waypoints and the central square. Targets are drawn among the
-//! free cells that are no waypoint and are seen by at least `cover` routes, each with
+//! free cells that are not waypoints and are seen by at least `cover` routes, each with
 //! weight the number of routes that see it (cells many UAVs watch, where communication
 //! helps, are favoured), at least two cells apart when possible. If too few cells qualify
 //! the occlusion is drawn again, a bounded number of times, then the spec is refused.

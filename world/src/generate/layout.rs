@@ -9,8 +9,8 @@
 //! watched mostly by its own UAV and by its neighbours at the edges, and the central square
 //! by every UAV: a target there is visible to all of them, from different poses.
 //!
-//! All geometry uses `+ - * /` and rounding only (no trigonometry), which IEEE 754 makes
-//! identical on every machine, so the same seed gives the same map everywhere.
+//! All geometry uses `+ - * /`, `sqrt` and rounding only (no trigonometry), which IEEE 754
+//! makes identical on every machine, so the same seed gives the same map everywhere.
 
 use flockstep_proto::{Heading, Height};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -282,10 +282,12 @@ fn route(
     cells
 }
 
+/// A patrol cut in two: from the start of the rim on, and the waypoints before it.
+type Split = (Vec<(usize, usize)>, Vec<(usize, usize)>);
+
 /// `n` waypoints evenly spaced along `line` (of length `total`), each moved by up to one
 /// cell; none in the central square, none twice. Split at the one nearest the start of the
-/// rim (at fraction `leg` of the line): from there on, and the ones before it.
-type Split = (Vec<(usize, usize)>, Vec<(usize, usize)>);
+/// rim (at fraction `leg` of the line).
 fn patrol(
     frame: &Frame,
     hub: Hub,
