@@ -9,7 +9,7 @@
 use crate::bt::spec::TreeSpec;
 use crate::bt::status::Status;
 use crate::bt::tree::{TickContext, Tree, TreeError};
-use crate::comm::{outgoing_flags, CommMode, CommState};
+use crate::comm::{CommMode, CommState};
 use crate::learning::{LearnParams, StateId};
 use crate::state::StateSpace;
 use crate::uav::Body;
@@ -91,6 +91,8 @@ pub struct TrialAgent {
     tree: Tree,
     states: StateSpace,
     comm: CommState,
+    /// The map (public knowledge): which candidate cells each pose's camera covers.
+    scenario: Arc<Scenario>,
     train_params: LearnParams,
     /// The pose after this agent's last commands (the state a truncated episode ends in).
     pose: Pose,
@@ -117,7 +119,8 @@ impl TrialAgent {
             route_len: spec.scenario.route_len(spec.slot),
             tree: Tree::new(&spec.tree, spec.params, rng)?,
             states: StateSpace::default(),
-            comm: CommState::new(spec.comm, spec.slot, &route_lens),
+            comm: CommState::new(spec.comm, spec.slot, &route_lens, spec.scenario.n_targets()),
+            scenario: spec.scenario.clone(),
             train_params: spec.params,
             pose: spec.scenario.start_pose(),
             open: None,
@@ -152,7 +155,8 @@ impl TrialAgent {
         }
         self.pose = view.pose;
         let sees_target = view.sees_target == 1;
-        out.flags = outgoing_flags(view.pose.waypoint, sees_target);
+        self.comm.note_own(self.scenario.visible_targets(self.slot, view.pose), sees_target);
+        out.flags = self.comm.outgoing(view.pose.waypoint, sees_target);
         if self.finished {
             return Ok(());
         }

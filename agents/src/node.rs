@@ -318,7 +318,7 @@ impl Session {
             Scenario::resolve(&setup.scenario).map_err(|e| anyhow::anyhow!("scenario: {e}"))?,
         );
         let comm = CommMode::parse(&setup.comm).with_context(|| {
-            format!("communication mode `{}`: expected none or flags", setup.comm)
+            format!("communication mode `{}`: expected none, flags or compact", setup.comm)
         })?;
         let tree = load_tree(learner.bt.as_deref())?;
         let tree_text = to_text(&tree);

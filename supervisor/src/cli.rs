@@ -45,6 +45,13 @@ pub enum Command {
         #[arg(long, value_enum, default_value_t = Transport::Shm)]
         transport: Transport,
     },
+    /// Write a generated scenario (`gen:uavs=N,...`) as a .map file.
+    Generate {
+        /// e.g. `gen:uavs=8,targets=4,occlusion=0.15,cover=all,seed=1`.
+        spec: String,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Draw several learning curves (curve.csv files) on one plot, e.g. the thesis's Fig. 11.
     Plot {
         /// `PATH/curve.csv=LABEL`; repeat for each curve. Agent 1's curve is drawn.
@@ -98,10 +105,12 @@ pub struct RunArgs {
     /// Seed of the run; every random stream is derived from it.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// s1, s2, s3 or a path to a .map file [default: s3 for 2+ UAVs, s2 for 1].
+    /// s1, s2, s3, s4, gen:KEY=VALUE,... or a path to a .map file [default: s2 for 1 UAV,
+    /// s3 for 2, a generated map for more].
     #[arg(long)]
     pub scenario: Option<String>,
-    /// Communication: none or flags [default: flags for 2+ UAVs, none for 1].
+    /// Communication: none, flags or compact [default: none for 1 UAV, flags for 2,
+    /// compact for more].
     #[arg(long)]
     pub comm: Option<String>,
     /// Behavior tree file [default: the thesis's Fig. 5 tree].
@@ -119,6 +128,13 @@ pub struct RunArgs {
     /// Greedy evaluation episodes per trial after training (epsilon 0, no learning).
     #[arg(long, default_value_t = 1000)]
     pub eval_episodes: u64,
+    /// Evaluate the greedy policy for `--eval-block` episodes after every N training
+    /// episodes (0: only after training); drawn on the curve plot, in greedy_curve.csv.
+    #[arg(long, default_value_t = 0)]
+    pub eval_every: u64,
+    /// Episodes of each periodic greedy evaluation.
+    #[arg(long, default_value_t = 100)]
+    pub eval_block: u64,
     /// Smoothing window (episodes) of the learning curve [default: episodes / 100, at least 1].
     #[arg(long)]
     pub smoothing: Option<usize>,

@@ -1,4 +1,4 @@
-//! The supervisor's helper subcommands: `optimum` and `plot`.
+//! The supervisor's helper subcommands: `optimum`, `generate` and `plot`.
 
 use crate::curve::read_smoothed;
 use crate::plot::{plot_curves, Series};
@@ -39,6 +39,15 @@ pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
         loaded.push((label.to_string(), read_smoothed(Path::new(path), 1)?));
     }
     let series: Vec<Series> =
-        loaded.iter().map(|(label, values)| Series { label: label.clone(), values }).collect();
+        loaded.iter().map(|(label, values)| Series::from_values(label.clone(), values)).collect();
     plot_curves(out, title, &series, &[])
+}
+
+/// Writes the generated scenario `spec` as a `.map` file (it loads back as it is).
+pub fn generate(spec: &str, out: &Path) -> Result<()> {
+    let text =
+        flockstep_world::generate::generate_text(spec).map_err(|e| anyhow::anyhow!("{e}"))?;
+    std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+    println!("{}", out.display());
+    Ok(())
 }

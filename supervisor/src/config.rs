@@ -60,8 +60,7 @@ impl RunConfig {
         if args.tick_cap == 0 {
             bail!("--tick-cap must be at least 1");
         }
-        let scenario_arg =
-            args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs).to_string());
+        let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs));
         let scenario =
             Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
         if args.uavs > scenario.n_routes() {
@@ -74,9 +73,8 @@ impl RunConfig {
         }
         let comm = match &args.comm {
             Some(c) => CommMode::parse(c)
-                .with_context(|| format!("--comm `{c}`: expected none or flags"))?,
-            None if args.uavs > 1 => CommMode::Flags,
-            None => CommMode::None,
+                .with_context(|| format!("--comm `{c}`: expected none, flags or compact"))?,
+            None => default_comm(args.uavs),
         };
         let tree = load_tree(args.bt.as_ref())?;
         let params = LearnParams {
@@ -103,6 +101,8 @@ impl RunConfig {
             episodes: EpisodeConfig {
                 train_episodes: args.episodes,
                 eval_episodes: args.eval_episodes,
+                eval_every: args.eval_every,
+                eval_block: args.eval_block,
                 tick_cap: args.tick_cap,
             },
             uavs: args.uavs,
@@ -140,12 +140,24 @@ impl RunConfig {
     }
 }
 
-/// The thesis's scenarios: one UAV searches two candidate cells (s2), two UAVs share them (s3).
-pub fn default_scenario(uavs: usize) -> &'static str {
-    if uavs == 1 {
-        "s2"
-    } else {
-        "s3"
+/// The thesis's scenarios for one and two UAVs: one UAV searches two candidate cells (s2),
+/// two UAVs share them (s3). More UAVs fly a generated map on which every route sees every
+/// candidate cell (see `flockstep_world::generate::default_generated_spec`).
+pub fn default_scenario(uavs: usize) -> String {
+    match uavs {
+        1 => "s2".to_string(),
+        2 => "s3".to_string(),
+        n => flockstep_world::generate::default_generated_spec(n),
+    }
+}
+
+/// The thesis's modes for one and two UAVs (none, flags); for more, the compact mode,
+/// whose state does not grow with the number of UAVs (flags' does, exponentially).
+pub fn default_comm(uavs: usize) -> CommMode {
+    match uavs {
+        1 => CommMode::None,
+        2 => CommMode::Flags,
+        _ => CommMode::Compact,
     }
 }
 

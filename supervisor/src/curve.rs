@@ -59,6 +59,19 @@ pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Writes `greedy_curve.csv`: `train_episodes,agent,greedy_mean_length,truncated`, one row
+/// per periodic greedy evaluation (`greedy[agent]`).
+pub fn write_greedy_csv(path: &Path, greedy: &[Vec<(u64, f64, u64)>]) -> Result<()> {
+    let mut text = String::from("train_episodes,agent,greedy_mean_length,truncated\n");
+    for (agent, points) in greedy.iter().enumerate() {
+        for (episodes, mean, truncated) in points {
+            writeln!(text, "{episodes},{},{mean:.4},{truncated}", agent + 1)
+                .expect("writing to a String");
+        }
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Reads agent `agent`'s smoothed curve back from a `curve.csv`.
 pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
     let text =

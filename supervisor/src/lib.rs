@@ -49,6 +49,7 @@ fn dispatch(cli: Cli) -> Result<u8> {
         Some(Command::Plot { curves, out, title }) => {
             commands::plot(&curves, &out, &title).map(|()| 0)
         }
+        Some(Command::Generate { spec, out }) => commands::generate(&spec, &out).map(|()| 0),
         Some(Command::Reproduce { figure, out, episodes, trials, seed, transport }) => {
             let stop = stop_on_ctrl_c()?;
             let base = cli::RunArgs { episodes, trials, seed, transport, ..cli.run };

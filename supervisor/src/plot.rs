@@ -5,10 +5,22 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use std::path::Path;
 
-/// A named line of the plot.
-pub struct Series<'a> {
+/// A named line of the plot: (iteration, episode length) points.
+pub struct Series {
     pub label: String,
-    pub values: &'a [f64],
+    pub points: Vec<(f64, f64)>,
+}
+
+impl Series {
+    /// A line with one value per iteration, thinned to at most ~2000 points (the curves are
+    /// smoothed already, and it keeps the SVG small).
+    pub fn from_values(label: String, values: &[f64]) -> Series {
+        let step = (values.len() / 2000).max(1);
+        Series {
+            label,
+            points: values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y)).collect(),
+        }
+    }
 }
 
 /// A horizontal reference line, e.g. "optimum 11.5".
@@ -36,10 +48,10 @@ pub fn plot_curves(
     references: &[Reference],
 ) -> Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow!("cannot draw {}: {e}", path.display());
-    let episodes = series.iter().map(|s| s.values.len()).max().unwrap_or(0).max(1);
+    let episodes = series.iter().flat_map(|s| s.points.iter().map(|p| p.0)).fold(1.0f64, f64::max);
     let all = series
         .iter()
-        .flat_map(|s| s.values.iter().copied())
+        .flat_map(|s| s.points.iter().map(|p| p.1))
         .chain(references.iter().map(|r| r.value));
     let top = all.fold(1.0f64, f64::max) * 1.05;
     let root = SVGBackend::new(path, (960, 600)).into_drawing_area();
@@ -49,7 +61,7 @@ pub fn plot_curves(
         .margin(16)
         .x_label_area_size(44)
         .y_label_area_size(56)
-        .build_cartesian_2d(0f64..episodes as f64, 0f64..top)
+        .build_cartesian_2d(0f64..episodes, 0f64..top)
         .map_err(|e| err(&e))?;
     chart
         .configure_mesh()
@@ -59,11 +71,8 @@ pub fn plot_curves(
         .map_err(|e| err(&e))?;
     for (i, s) in series.iter().enumerate() {
         let color = COLORS[i % COLORS.len()];
-        // At most ~2000 points per line keeps the SVG small; the curve is already smoothed.
-        let step = (s.values.len() / 2000).max(1);
-        let points = s.values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y));
         chart
-            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
             .map_err(|e| err(&e))?
             .label(s.label.clone())
             .legend(move |(x, y)| {

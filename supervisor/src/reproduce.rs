@@ -54,8 +54,10 @@ pub fn reproduce(
         curves.push((label, read_smoothed(&config.out.join("curve.csv"), 1)?));
     }
     let references = references(figure)?;
-    let series: Vec<Series> =
-        curves.iter().map(|(label, values)| Series { label: label.to_string(), values }).collect();
+    let series: Vec<Series> = curves
+        .iter()
+        .map(|(label, values)| Series::from_values(label.to_string(), values))
+        .collect();
     let path = out.join(format!("{name}.svg"));
     let title = match figure {
         Figure::Fig10 => "Fig. 10: one UAV, one target, no communication (mean of trials)",

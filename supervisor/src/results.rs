@@ -23,6 +23,32 @@ pub struct GreedyStats {
     pub per_trial: Vec<f64>,
 }
 
+/// Where greedy-evaluation episodes belong: periodic blocks during training, then the final
+/// evaluation. Evaluation episodes are numbered through all blocks of a trial.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EvalPlan {
+    /// Periodic blocks per trial (after every `every` training episodes, before the last).
+    pub blocks: u64,
+    pub block: u64,
+    pub every: u64,
+}
+
+impl EvalPlan {
+    pub fn new(train_episodes: u64, every: u64, block: u64) -> EvalPlan {
+        let blocks =
+            if every > 0 && block > 0 { train_episodes.saturating_sub(1) / every } else { 0 };
+        EvalPlan { blocks, block, every }
+    }
+
+    /// The periodic block of evaluation episode `index`, or None for the final evaluation.
+    fn block_of(&self, index: u64) -> Option<usize> {
+        (index < self.blocks * self.block).then(|| (index / self.block) as usize)
+    }
+}
+
+/// Greedy totals of one periodic block: (episodes, total length, truncated).
+type Totals = (u64, u64, u64);
+
 /// Everything the run recorded.
 #[derive(Debug)]
 pub struct Collector {
@@ -31,14 +57,17 @@ pub struct Collector {
     /// Training lengths: `train[agent][trial][episode]`.
     train: Vec<Vec<Vec<u32>>>,
     train_truncated: Vec<u64>,
-    /// Greedy sums: `(episodes, total length, truncated)` per agent and trial.
-    greedy: Vec<Vec<(u64, u64, u64)>>,
+    /// Final greedy sums: `(episodes, total length, truncated)` per agent and trial.
+    greedy: Vec<Vec<Totals>>,
+    plan: EvalPlan,
+    /// Periodic greedy sums per agent and block, over all trials.
+    periodic: Vec<Vec<Totals>>,
     /// Ticks of every trial, counting training and evaluation.
     ticks: Vec<u64>,
 }
 
 impl Collector {
-    pub fn create(dir: &Path, agents: usize, trials: usize) -> Result<Collector> {
+    pub fn create(dir: &Path, agents: usize, trials: usize, plan: EvalPlan) -> Result<Collector> {
         let open = |name: &str| -> Result<BufWriter<File>> {
             let path = dir.join(name);
             let mut file = BufWriter::new(
@@ -53,6 +82,8 @@ impl Collector {
             train: vec![vec![Vec::new(); trials]; agents],
             train_truncated: vec![0; agents],
             greedy: vec![vec![(0, 0, 0); trials]; agents],
+            plan,
+            periodic: vec![vec![(0, 0, 0); plan.blocks as usize]; agents],
             ticks: vec![0; trials],
         })
     }
@@ -97,7 +128,10 @@ impl Collector {
                 }
                 Phase::Eval => {
                     self.greedy_csv.write_all(line.as_bytes())?;
-                    let entry = &mut self.greedy[slot][trial];
+                    let entry = match self.plan.block_of(report.episode) {
+                        Some(block) => &mut self.periodic[slot][block],
+                        None => &mut self.greedy[slot][trial],
+                    };
                     entry.0 += 1;
                     entry.1 += u64::from(length);
                     entry.2 += truncated;
@@ -113,6 +147,7 @@ impl Collector {
         self.train.resize(agents, vec![Vec::new(); trials]);
         self.train_truncated.resize(agents, 0);
         self.greedy.resize(agents, vec![(0, 0, 0); trials]);
+        self.periodic.resize(agents, vec![(0, 0, 0); self.plan.blocks as usize]);
     }
 
     pub fn flush(&mut self) -> Result<()> {
@@ -149,7 +184,22 @@ impl Collector {
         (!means.is_empty()).then(|| means.iter().sum::<f64>() / means.len() as f64)
     }
 
-    /// Greedy totals of `agent` (None if it was never evaluated).
+    /// The periodic greedy evaluations of `agent`: (training episodes behind the policy,
+    /// mean greedy length over trials and episodes, truncated episodes), for blocks run.
+    pub fn greedy_curve(&self, agent: usize) -> Vec<(u64, f64, u64)> {
+        self.periodic.get(agent).map_or_else(Vec::new, |blocks| {
+            blocks
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| t.0 > 0)
+                .map(|(b, &(n, total, truncated))| {
+                    ((b as u64 + 1) * self.plan.every, total as f64 / n as f64, truncated)
+                })
+                .collect()
+        })
+    }
+
+    /// Greedy totals of `agent` after training (None if it was never evaluated).
     pub fn greedy(&self, agent: usize) -> Option<GreedyStats> {
         let trials = self.greedy.get(agent)?;
         let mut stats = GreedyStats::default();

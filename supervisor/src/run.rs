@@ -5,9 +5,9 @@
 use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::curve;
-use crate::plot::{plot_curves, Series};
+use crate::plot::{plot_curves, Reference, Series};
 use crate::recorder::Recorder;
-use crate::results::Collector;
+use crate::results::{Collector, EvalPlan};
 use crate::summary;
 use anyhow::{Context, Result};
 use std::sync::atomic::AtomicBool;
@@ -24,7 +24,9 @@ pub struct Outcome {
 
 pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> {
     prepare_out_dir(config)?;
-    let collector = Collector::create(&config.out, config.uavs, config.trials)?;
+    let e = &config.episodes;
+    let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
+    let collector = Collector::create(&config.out, config.uavs, config.trials, plan)?;
     let total = config.episodes.train_episodes * config.trials as u64;
     let mut recorder = Recorder::new(collector, total, config.quiet);
     let started = Instant::now();
@@ -59,19 +61,45 @@ fn prepare_out_dir(config: &RunConfig) -> Result<()> {
     Ok(())
 }
 
+/// Agents drawn on the curve plot (more lines would hide each other).
+const PLOTTED_AGENTS: usize = 8;
+
 fn write_results(
     config: &RunConfig,
     recorder: &Recorder,
     wall: f64,
     outcome: &Outcome,
 ) -> Result<()> {
-    let curves = curve::curves(recorder.collector().train_lengths(), config.smoothing);
+    let collector = recorder.collector();
+    let curves = curve::curves(collector.train_lengths(), config.smoothing);
     curve::write_csv(&config.out.join("curve.csv"), &curves)?;
-    let series: Vec<Series> = curves
+    let greedy: Vec<_> = (0..collector.agents()).map(|a| collector.greedy_curve(a)).collect();
+    curve::write_greedy_csv(&config.out.join("greedy_curve.csv"), &greedy)?;
+    let mut series: Vec<Series> = curves
         .iter()
-        .map(|c| Series {
-            label: format!("UAV{} (mean of {} trials)", c.agent, config.trials),
-            values: &c.smoothed,
+        .take(PLOTTED_AGENTS)
+        .map(|c| {
+            Series::from_values(
+                format!("UAV{} (mean of {} trials)", c.agent, config.trials),
+                &c.smoothed,
+            )
+        })
+        .collect();
+    for (agent, points) in
+        greedy.iter().enumerate().take(PLOTTED_AGENTS).filter(|(_, p)| !p.is_empty())
+    {
+        series.push(Series {
+            label: format!("UAV{} greedy", agent + 1),
+            points: points.iter().map(|&(x, y, _)| (x as f64, y)).collect(),
+        });
+    }
+    let references: Vec<Reference> = (0..collector.agents())
+        .take(PLOTTED_AGENTS)
+        .filter_map(|a| {
+            Some(Reference {
+                label: format!("UAV{} greedy after training", a + 1),
+                value: collector.greedy(a)?.mean(),
+            })
         })
         .collect();
     let title = format!(
@@ -80,7 +108,7 @@ fn write_results(
         config.comm.name(),
         config.episodes.train_episodes
     );
-    plot_curves(&config.out.join("curve.svg"), &title, &series, &[])?;
+    plot_curves(&config.out.join("curve.svg"), &title, &series, &references)?;
     let value = summary::summary(config, recorder, wall, outcome.complete, &outcome.notes);
     summary::write(&config.out.join("summary.json"), &value)
 }

@@ -169,6 +169,8 @@ fn world_command(config: &RunConfig) -> Result<Command> {
         .args(["--seed", &config.seed.to_string()])
         .args(["--episodes", &config.episodes.train_episodes.to_string()])
         .args(["--eval-episodes", &config.episodes.eval_episodes.to_string()])
+        .args(["--eval-every", &config.episodes.eval_every.to_string()])
+        .args(["--eval-block", &config.episodes.eval_block.to_string()])
         .args(["--tick-cap", &config.episodes.tick_cap.to_string()])
         .args(["--comm", config.comm.name()])
         .args(["--alpha", &config.params.alpha.to_string()])

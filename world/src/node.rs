@@ -43,6 +43,10 @@ pub struct WorldArgs {
     pub episodes: u64,
     #[arg(long)]
     pub eval_episodes: u64,
+    #[arg(long, default_value_t = 0)]
+    pub eval_every: u64,
+    #[arg(long, default_value_t = 0)]
+    pub eval_block: u64,
     #[arg(long)]
     pub tick_cap: u32,
     /// The run's communication mode and learning parameters, told to attaching agents.
@@ -95,6 +99,8 @@ pub fn run(args: &WorldArgs) -> Result<()> {
     let config = EpisodeConfig {
         train_episodes: args.episodes,
         eval_episodes: args.eval_episodes,
+        eval_every: args.eval_every,
+        eval_block: args.eval_block,
         tick_cap: args.tick_cap,
     };
     let world = World::new(Arc::new(scenario), args.uavs, args.trials, args.seed, config)?;

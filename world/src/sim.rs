@@ -28,6 +28,10 @@ pub struct EpisodeConfig {
     pub train_episodes: u64,
     /// Greedy evaluation episodes per trial after training (0: none).
     pub eval_episodes: u64,
+    /// A block of `eval_block` greedy episodes after every `eval_every` training episodes
+    /// (0: none), to follow the greedy policy while it learns.
+    pub eval_every: u64,
+    pub eval_block: u64,
     /// Ticks after which a shared episode is cut (truncated).
     pub tick_cap: u32,
 }
@@ -50,7 +54,12 @@ pub struct TrialWorld {
     /// Per slot: the flags it sent in the last tick, relayed in the next observation.
     flags: Vec<Flags>,
     phase: Phase,
-    episode: u64,
+    /// Training episodes finished.
+    trained: u64,
+    /// Evaluation episodes finished (all blocks together).
+    evaluated: u64,
+    /// Evaluation episodes left in the current block.
+    block_left: u64,
     tick: u64,
     episode_tick: u32,
     episode_start: u64,
@@ -82,19 +91,70 @@ impl TrialWorld {
             finished_at: vec![0; slots],
             flags: vec![Flags::default(); slots],
             phase: Phase::Train,
-            episode: 0,
+            trained: 0,
+            evaluated: 0,
+            block_left: 0,
             tick: 0,
             episode_tick: 0,
             episode_start: 0,
             target: 0,
-            done: config.train_episodes == 0 && config.eval_episodes == 0,
+            done: false,
             scenario,
         };
         if config.train_episodes == 0 {
-            world.phase = Phase::Eval;
+            world.begin_eval(config.eval_episodes);
         }
         world.start_episode();
         world
+    }
+
+    /// Starts a block of `episodes` greedy episodes; after the last training episode a
+    /// block of none means the trial is done.
+    fn begin_eval(&mut self, episodes: u64) {
+        if episodes == 0 {
+            self.done = self.trained == self.config.train_episodes;
+            return;
+        }
+        self.phase = Phase::Eval;
+        self.block_left = episodes;
+    }
+
+    /// The index of the episode in progress within its phase.
+    fn episode(&self) -> u64 {
+        match self.phase {
+            Phase::Train => self.trained,
+            Phase::Eval => self.evaluated,
+        }
+    }
+
+    /// Moves on after an episode: evaluation blocks after every `eval_every` training
+    /// episodes and after the last one; training again after a block; done at the end.
+    fn next_episode(&mut self) {
+        let config = self.config;
+        match self.phase {
+            Phase::Train => {
+                self.trained += 1;
+                if self.trained == config.train_episodes {
+                    self.begin_eval(config.eval_episodes);
+                } else if config.eval_every > 0
+                    && config.eval_block > 0
+                    && self.trained % config.eval_every == 0
+                {
+                    self.begin_eval(config.eval_block);
+                }
+            }
+            Phase::Eval => {
+                self.evaluated += 1;
+                self.block_left -= 1;
+                if self.block_left == 0 {
+                    if self.trained == config.train_episodes {
+                        self.done = true;
+                    } else {
+                        self.phase = Phase::Train;
+                    }
+                }
+            }
+        }
     }
 
     fn start_episode(&mut self) {
@@ -115,7 +175,7 @@ impl TrialWorld {
 
     /// Writes this trial's part of the round's broadcast.
     pub fn observe(&self, out: &mut TrialObservation) {
-        out.episode = self.episode;
+        out.episode = self.episode();
         out.tick = self.tick;
         out.episode_tick = self.episode_tick;
         out.done = self.done as u8;
@@ -142,6 +202,20 @@ impl TrialWorld {
         flockstep_proto::check_below("flags.waypoint", action.flags.waypoint.into(), route_len)?;
         flockstep_proto::check_below("flags.sees_target", action.flags.sees_target.into(), 2)?;
         flockstep_proto::check_below("action.ended", action.ended.into(), 2)?;
+        let targets = self.scenario.n_targets();
+        let valid = if targets >= 64 { u64::MAX } else { (1 << targets) - 1 };
+        for (field, mask) in [
+            ("flags.ruled_out", action.flags.ruled_out),
+            ("flags.confirmed", action.flags.confirmed),
+        ] {
+            if mask & !valid != 0 {
+                return Err(FieldError {
+                    field,
+                    value: mask,
+                    expected: format!("a mask within {valid:#x}"),
+                });
+            }
+        }
         action.decode_commands().try_for_each(|command| command.map(drop))
     }
 
@@ -182,7 +256,7 @@ impl TrialWorld {
             trial: self.trial,
             target: self.target as u16,
             phase: self.phase as u8,
-            episode: self.episode,
+            episode: self.episode(),
             start_tick: self.episode_start,
             members: self.members,
             ..EpisodeReport::default()
@@ -194,14 +268,8 @@ impl TrialWorld {
                 report.truncated |= 1 << slot;
             }
         }
-        self.episode += 1;
-        if self.phase == Phase::Train && self.episode == self.config.train_episodes {
-            self.phase = Phase::Eval;
-            self.episode = 0;
-        }
-        if self.phase == Phase::Eval && self.episode == self.config.eval_episodes {
-            self.done = true;
-        } else {
+        self.next_episode();
+        if !self.done {
             self.start_episode();
         }
         Some(report)
