@@ -14,7 +14,7 @@ use crate::bt::render::to_text;
 use crate::bt::spec::TreeSpec;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
-use crate::snapshot::{snapshot_path, write_snapshot, write_snapshots, Snapshot};
+use crate::snapshot::{restore_snapshots, write_snapshot, write_snapshots};
 use crate::trace::Trace;
 use crate::uav::UavCatalog;
 use anyhow::{bail, Context, Result};
@@ -340,20 +340,9 @@ impl Session {
         };
         let mut agent = UavAgent::new(&spec)?;
         if let Some(dir) = &learner.resume {
-            for (trial, part) in agent.trials_mut().iter_mut().enumerate() {
-                let path = snapshot_path(dir, slot, trial);
-                match std::fs::read(&path) {
-                    Ok(bytes) => Snapshot::decode(&bytes)
-                        .and_then(|s| s.restore(part, scenario.name(), comm, &tree_text))
-                        .with_context(|| format!("snapshot {}", path.display()))?,
-                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                        tracing::warn!(path = %path.display(), "no snapshot for this trial: it starts from scratch");
-                    }
-                    Err(e) => {
-                        return Err(e)
-                            .with_context(|| format!("cannot read snapshot {}", path.display()))
-                    }
-                }
+            // A restart before the first periodic snapshot starts those trials afresh.
+            for trial in restore_snapshots(&mut agent, dir, scenario.name(), comm, &tree_text)? {
+                tracing::warn!(trial, "no snapshot for this trial: it starts from scratch");
             }
         }
         let saved = agent.trials().iter().map(|t| t.trained_episodes()).collect();

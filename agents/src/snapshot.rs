@@ -42,6 +42,14 @@ pub enum SnapshotError {
     Mismatch { what: &'static str, found: String, expected: String },
     #[error("inconsistent snapshot: {0}")]
     Inconsistent(String),
+    #[error("{path}: {source}")]
+    File {
+        path: String,
+        #[source]
+        source: Box<SnapshotError>,
+    },
+    #[error("cannot read {path}: {source}")]
+    Io { path: String, source: std::io::Error },
 }
 
 impl Snapshot {
@@ -162,4 +170,34 @@ pub fn write_snapshots(
         write_snapshot(part, out, trial, scenario, comm, tree)?;
     }
     Ok(())
+}
+
+/// Loads every trial of `agent` from the snapshots under `dir` (as [`write_snapshots`] lays
+/// them out). Returns the trials that have no snapshot there (they keep empty tables).
+pub fn restore_snapshots(
+    agent: &mut crate::agent::UavAgent,
+    dir: &std::path::Path,
+    scenario: &str,
+    comm: CommMode,
+    tree: &str,
+) -> Result<Vec<usize>, SnapshotError> {
+    let mut missing = Vec::new();
+    let slot = agent.slot();
+    for (trial, part) in agent.trials_mut().iter_mut().enumerate() {
+        let path = snapshot_path(dir, slot, trial);
+        let file = |source| SnapshotError::File {
+            path: path.display().to_string(),
+            source: Box::new(source),
+        };
+        match std::fs::read(&path) {
+            Ok(bytes) => Snapshot::decode(&bytes)
+                .and_then(|s| s.restore(part, scenario, comm, tree))
+                .map_err(file)?,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => missing.push(trial),
+            Err(source) => {
+                return Err(SnapshotError::Io { path: path.display().to_string(), source })
+            }
+        }
+    }
+    Ok(missing)
 }

@@ -45,6 +45,19 @@ pub enum Command {
         #[arg(long, value_enum, default_value_t = Transport::Shm)]
         transport: Transport,
     },
+    /// Evaluate the Q-tables of a finished run greedily (epsilon 0, no learning) on the
+    /// same scenario, tree and seed; results go to `<DIR>/eval/` unless `--out` is given.
+    Eval {
+        /// The results directory of the run (its qtables/, summary.json, scenario.map, tree.bt).
+        #[arg(long)]
+        qtables: PathBuf,
+        #[arg(long, default_value_t = 1000)]
+        episodes: u64,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long, value_enum, default_value_t = Transport::Inproc)]
+        transport: Transport,
+    },
     /// Write a generated scenario (`gen:uavs=N,...`) as a .map file.
     Generate {
         /// e.g. `gen:uavs=8,targets=4,occlusion=0.15,cover=all,seed=1`.
@@ -96,7 +109,7 @@ pub struct RunArgs {
     /// Number of UAV agents.
     #[arg(long, default_value_t = 2)]
     pub uavs: usize,
-    /// Training episodes per trial.
+    /// Training episodes per trial (0 only with --resume: evaluate only).
     #[arg(long, default_value_t = 50_000)]
     pub episodes: u64,
     /// Independent trials (own seed, world and learners), advanced together.
@@ -138,6 +151,10 @@ pub struct RunArgs {
     /// Smoothing window (episodes) of the learning curve [default: episodes / 100, at least 1].
     #[arg(long)]
     pub smoothing: Option<usize>,
+    /// Start every agent from the Q-table snapshots of an earlier run (`DIR/qtables/`).
+    /// With `--episodes 0` the run only evaluates them greedily.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
     /// Results directory [default: results/<run-id>].
     #[arg(long)]
     pub out: Option<PathBuf>,

@@ -1,4 +1,4 @@
-//! The supervisor's helper subcommands: `optimum`, `generate` and `plot`.
+//! The supervisor's helper subcommands: `optimum`, `eval`, `generate` and `plot`.
 
 use crate::curve::read_smoothed;
 use crate::plot::{plot_curves, Series};
@@ -49,5 +49,60 @@ pub fn generate(spec: &str, out: &Path) -> Result<()> {
         flockstep_world::generate::generate_text(spec).map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
     println!("{}", out.display());
+    Ok(())
+}
+
+/// Evaluates the snapshots of the run in `dir` greedily: the same scenario (its
+/// `scenario.map`), tree (`tree.bt`), agents, trials, seed and communication as recorded in
+/// its `summary.json`, no training. Prints the greedy length of every agent.
+pub fn eval(
+    dir: &Path,
+    episodes: u64,
+    out: Option<std::path::PathBuf>,
+    transport: crate::cli::Transport,
+    defaults: &crate::cli::RunArgs,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<()> {
+    let summary = crate::summary::summary_file(dir)?;
+    let path = dir.join("summary.json");
+    let number = |key: &str| {
+        summary[key].as_u64().with_context(|| format!("{}: no number `{key}`", path.display()))
+    };
+    let args = crate::cli::RunArgs {
+        uavs: number("uavs")? as usize,
+        trials: number("trials")? as usize,
+        seed: number("seed")?,
+        tick_cap: number("tick_cap")? as u32,
+        comm: Some(
+            summary["comm"]
+                .as_str()
+                .with_context(|| format!("{}: no `comm`", path.display()))?
+                .to_string(),
+        ),
+        scenario: Some(dir.join("scenario.map").display().to_string()),
+        bt: Some(dir.join("tree.bt")),
+        episodes: 0,
+        eval_episodes: episodes,
+        eval_every: 0,
+        resume: Some(dir.to_path_buf()),
+        out: Some(out.unwrap_or_else(|| dir.join("eval"))),
+        transport,
+        run_id: None,
+        ..defaults.clone()
+    };
+    let config = crate::config::RunConfig::resolve(&args)?;
+    let outcome = crate::run::run_experiment(&config, stop)?;
+    let result = crate::summary::summary_file(&config.out)?;
+    for (agent, length) in
+        result["greedy_episode_length"].as_array().into_iter().flatten().enumerate()
+    {
+        let truncated = &result["greedy_truncated"][agent];
+        println!(
+            "UAV{} greedy episode length {length} ({truncated} of {} episodes truncated)",
+            agent + 1,
+            result["greedy_episodes"][agent]
+        );
+    }
+    anyhow::ensure!(outcome.complete, "the evaluation was stopped early");
     Ok(())
 }

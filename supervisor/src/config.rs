@@ -36,6 +36,8 @@ pub struct RunConfig {
     pub run_id: String,
     pub quiet: bool,
     pub trace_dir: Option<PathBuf>,
+    /// Snapshots every agent starts from (checked to exist for every agent and trial).
+    pub resume: Option<PathBuf>,
     pub agent_timeout_ms: u64,
     pub restart: Restart,
     pub snapshot_every: u64,
@@ -54,8 +56,8 @@ impl RunConfig {
         if args.trials == 0 || args.trials > MAX_TRIALS {
             bail!("--trials {} is out of range 1..={MAX_TRIALS}", args.trials);
         }
-        if args.episodes == 0 {
-            bail!("--episodes must be at least 1");
+        if args.episodes == 0 && (args.resume.is_none() || args.eval_episodes == 0) {
+            bail!("--episodes must be at least 1 (0 only to evaluate snapshots: --resume DIR with --eval-episodes)");
         }
         if args.tick_cap == 0 {
             bail!("--tick-cap must be at least 1");
@@ -114,6 +116,11 @@ impl RunConfig {
             run_id,
             quiet: args.quiet,
             trace_dir: args.trace_dir.clone(),
+            resume: args
+                .resume
+                .as_ref()
+                .map(|dir| check_snapshots(dir, args.uavs, args.trials))
+                .transpose()?,
             agent_timeout_ms: args.agent_timeout_ms,
             restart: args.restart,
             snapshot_every: args.snapshot_every,
@@ -172,6 +179,22 @@ pub fn load_tree(path: Option<&PathBuf>) -> Result<TreeSpec> {
             Ok(parse_tree(&path.display().to_string(), &text, &UavCatalog)?)
         }
     }
+}
+
+/// Checks that `dir` holds a snapshot for every agent and trial; returns `dir`.
+fn check_snapshots(dir: &std::path::Path, uavs: usize, trials: usize) -> Result<PathBuf> {
+    for slot in 0..uavs {
+        for trial in 0..trials {
+            let path = flockstep_agents::snapshot::snapshot_path(dir, slot, trial);
+            anyhow::ensure!(
+                path.is_file(),
+                "--resume: no snapshot {} (UAV{}, trial {trial})",
+                path.display(),
+                slot + 1
+            );
+        }
+    }
+    Ok(dir.to_path_buf())
 }
 
 /// `N=SPEC` pairs (N 1-based) into (slot, SPEC); the agent checks SPEC itself.

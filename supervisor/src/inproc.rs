@@ -6,7 +6,7 @@ use crate::config::RunConfig;
 use crate::recorder::Recorder;
 use anyhow::{Context, Result};
 use flockstep_agents::agent::UavAgent;
-use flockstep_agents::snapshot::write_snapshots;
+use flockstep_agents::snapshot::{restore_snapshots, write_snapshots};
 use flockstep_proto::{Action, Observation, ObservationKind};
 use flockstep_world::sim::World;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -23,6 +23,12 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     let mut agents = (0..config.uavs)
         .map(|slot| UavAgent::new(&config.agent_spec(slot)))
         .collect::<Result<Vec<_>, _>>()?;
+    let tree = config.tree_text();
+    if let Some(dir) = &config.resume {
+        for agent in &mut agents {
+            restore_snapshots(agent, dir, config.scenario.name(), config.comm, &tree)?;
+        }
+    }
     let mut observation = Box::<Observation>::default();
     let mut actions: Vec<Box<Action>> =
         (0..config.uavs).map(|slot| Box::new(Action::new(slot))).collect();
@@ -50,7 +56,6 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         }
         recorder.redraw();
     };
-    let tree = config.tree_text();
     for agent in &agents {
         write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)?;
     }

@@ -49,6 +49,10 @@ fn dispatch(cli: Cli) -> Result<u8> {
         Some(Command::Plot { curves, out, title }) => {
             commands::plot(&curves, &out, &title).map(|()| 0)
         }
+        Some(Command::Eval { qtables, episodes, out, transport }) => {
+            let stop = stop_on_ctrl_c()?;
+            commands::eval(&qtables, episodes, out, transport, &cli.run, &stop).map(|()| 0)
+        }
         Some(Command::Generate { spec, out }) => commands::generate(&spec, &out).map(|()| 0),
         Some(Command::Reproduce { figure, out, episodes, trials, seed, transport }) => {
             let stop = stop_on_ctrl_c()?;

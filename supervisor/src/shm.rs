@@ -203,8 +203,9 @@ fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Comman
     if let Some(bt) = &config.bt_path {
         command.arg("--bt").arg(bt);
     }
-    if resume {
-        command.arg("--resume").arg(&config.out);
+    // A restarted agent goes on from its own latest snapshot, a resumed run from the given ones.
+    if let Some(dir) = if resume { Some(&config.out) } else { config.resume.as_ref() } {
+        command.arg("--resume").arg(dir);
     }
     if let Some(dir) = &config.trace_dir {
         command.arg("--trace").arg(dir.join(format!("uav{}.trace.csv", slot + 1)));

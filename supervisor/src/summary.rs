@@ -1,9 +1,12 @@
 //! `summary.json`: the run's configuration, timings and headline results, for people and
-//! for scripts (tests and the results report read it).
+//! for scripts (tests and the results report read it). Beside each agent's greedy length
+//! stand the exact optima of its route flown alone: with a memoryless policy, and knowing
+//! the target in advance (a lower bound for any communication).
 
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
 use anyhow::{Context, Result};
+use flockstep_world::optimum::{optimum, optimum_with_known_target};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -59,10 +62,20 @@ pub fn summary(
         "greedy_episode_length_per_trial": greedy.iter().map(|g| g.as_ref().map(|g| g.per_trial.clone())).collect::<Vec<_>>(),
         "greedy_episodes": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.episodes)).collect::<Vec<_>>(),
         "greedy_truncated": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.truncated)).collect::<Vec<_>>(),
+        "optimum_memoryless": (0..agents).map(|a| optimum(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
+        "optimum_known_target": (0..agents).map(|a| optimum_with_known_target(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
     })
 }
 
 pub fn write(path: &Path, value: &Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value).expect("JSON values serialise");
     std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Reads back the `summary.json` of a results directory.
+pub fn summary_file(dir: &Path) -> Result<Value> {
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))
 }

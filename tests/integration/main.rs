@@ -15,3 +15,5 @@ mod harness;
 mod learning;
 /// Real world and agent processes: equivalence, lockstep, isolation, clean shutdown.
 mod shm;
+/// Evaluating and resuming from Q-table snapshots.
+mod snapshots;

@@ -1,0 +1,114 @@
+//! Q-table snapshots put to use (issue 5): `supervisor eval --qtables DIR` evaluates a
+//! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
+
+use crate::harness::{episode_rows, number, run_ok, scratch, summary, supervise, SUPERVISOR};
+
+#[test]
+fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
+    let dir = scratch();
+    let run = supervise(
+        dir.path(),
+        &[
+            "--transport",
+            "inproc",
+            "--scenario",
+            "s1",
+            "--uavs",
+            "1",
+            "--episodes",
+            "3000",
+            "--seed",
+            "3",
+        ],
+    );
+    let greedy = number(&run, "greedy_episode_length", 0);
+    for transport in ["inproc", "shm"] {
+        let out = dir.path().join(format!("eval-{transport}"));
+        let out_arg = out.display().to_string();
+        let qtables = dir.path().display().to_string();
+        let printed = run_ok(
+            SUPERVISOR,
+            &[
+                "eval",
+                "--qtables",
+                &qtables,
+                "--episodes",
+                "200",
+                "--transport",
+                transport,
+                "--out",
+                &out_arg,
+            ],
+        );
+        let text = String::from_utf8_lossy(&printed.stdout);
+        assert!(text.contains("UAV1 greedy episode length 13"), "{transport}: {text}");
+        let evaluated = summary(&out);
+        assert_eq!(number(&evaluated, "greedy_episode_length", 0), greedy, "{transport}");
+        assert_eq!(evaluated["episodes"], 0, "an evaluation does not train");
+        assert!(episode_rows(&out).is_empty(), "an evaluation has no training episodes");
+    }
+}
+
+#[test]
+fn resume_continues_from_the_learned_level() {
+    let first = scratch();
+    supervise(
+        first.path(),
+        &[
+            "--transport",
+            "inproc",
+            "--scenario",
+            "s2",
+            "--uavs",
+            "1",
+            "--episodes",
+            "3000",
+            "--seed",
+            "5",
+        ],
+    );
+    let second = scratch();
+    let resume = first.path().display().to_string();
+    supervise(
+        second.path(),
+        &[
+            "--transport",
+            "inproc",
+            "--scenario",
+            "s2",
+            "--uavs",
+            "1",
+            "--episodes",
+            "200",
+            "--seed",
+            "6",
+            "--resume",
+            &resume,
+        ],
+    );
+    let fresh = scratch();
+    supervise(
+        fresh.path(),
+        &[
+            "--transport",
+            "inproc",
+            "--scenario",
+            "s2",
+            "--uavs",
+            "1",
+            "--episodes",
+            "200",
+            "--seed",
+            "6",
+        ],
+    );
+    let mean = |dir: &std::path::Path| {
+        let rows = episode_rows(dir);
+        rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64
+    };
+    let (resumed, scratch_mean) = (mean(second.path()), mean(fresh.path()));
+    assert!(
+        resumed < 20.0 && resumed < scratch_mean / 2.0,
+        "resumed {resumed} vs from scratch {scratch_mean}"
+    );
+}
