@@ -2,18 +2,21 @@
 //! are meaningful on a noisy machine: the raw iceoryx2 lockstep barrier (world + N agents,
 //! no simulation work, the product's default waiting strategy; `common/raw_barrier.rs`), the
 //! real `supervisor` over shared memory (`--transport shm`) and in one process
-//! (`--transport inproc`), each at 1 and 4 trials. Repetitions are interleaved and the median
-//! is reported.
+//! (`--transport inproc`), each at 1 and 4 trials.
 //!
 //! `cargo bench --bench throughput -- [--uavs N].. [--scenario S] [--seconds S] [--repeats K]`
-//! prints `throughput what=...` lines on stdout, one per configuration, then
-//! `throughput ratio ...` lines; each single run is logged on stderr. A product run trains
-//! for a calibrated number of `--episodes` (about `--seconds` of work) with
-//! `--eval-episodes 0`: the greedy evaluation's length depends on how well each trial
+//! (default: 2 UAVs, 5 s, 5 repetitions) prints on stdout one `throughput what=...` line per
+//! configuration (the median over the repetitions), then `throughput ratio ...` and
+//! `throughput target ...` lines; each single run is logged on stderr. A repetition runs
+//! every configuration once, one after the other; each ratio is computed within a
+//! repetition, whose runs share the machine's foreign load, and its median is reported.
+//!
+//! A product run trains for a calibrated number of `--episodes` (about `--seconds` of work)
+//! with `--eval-episodes 0`: the greedy evaluation's length depends on how well each trial
 //! learned (an untrained trial runs every episode to the tick cap), which would make the
 //! work neither proportional to `--episodes` nor equal across trials. Start-up and shutdown
-//! are measured by a run of one episode and subtracted: `rounds_per_s` is
-//! (rounds - rounds of the one-episode run) / (wall - its wall), from `summary.json`;
+//! are measured by a run of one episode just before and subtracted: `rounds_per_s` is
+//! (rounds - rounds of the one-episode run) / (wall - its wall), both from `summary.json`;
 //! `summary_rounds_per_s` is the product's own figure, start-up included.
 //!
 //! A scenario with fewer routes than `--uavs` is skipped. Without `--bench` (as under

@@ -34,7 +34,7 @@ enum Command {
         command: BtCommand,
     },
     /// Run as UAV agent of a simulation (started by the supervisor).
-    Run(crate::node::NodeArgs),
+    Run(Box<crate::node::NodeArgs>),
 }
 
 #[derive(Debug, Subcommand)]

@@ -83,12 +83,7 @@ pub fn plot_curves(
         let color = COLORS[(series.len() + i) % COLORS.len()];
         let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
         chart
-            .draw_series(DashedLineSeries::new(
-                [(0.0, r.value), (episodes as f64, r.value)],
-                6,
-                4,
-                style,
-            ))
+            .draw_series(DashedLineSeries::new([(0.0, r.value), (episodes, r.value)], 6, 4, style))
             .map_err(|e| err(&e))?
             .label(format!("{} ({:.2})", r.label, r.value))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));

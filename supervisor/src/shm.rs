@@ -118,17 +118,21 @@ impl Fleet<'_> {
                 return Ok(Outcome { complete: !stop_sent, notes });
             }
             reported.resize(self.processes.len(), false);
-            for i in 1..self.processes.len() {
-                let Some(status) = self.processes[i].status()? else { continue };
-                if status.success() || reported[i] {
-                    continue;
+            let mut failed = Vec::new();
+            for (i, process) in self.processes.iter_mut().enumerate().skip(1) {
+                let Some(status) = process.status()? else { continue };
+                if !status.success() && !reported[i] {
+                    reported[i] = true;
+                    failed.push((
+                        self.slots[i],
+                        format!("{} failed ({status}): {}", process.name, process.last_words()),
+                    ));
                 }
-                reported[i] = true;
-                let process = &self.processes[i];
-                let note = format!("{} failed ({status}): {}", process.name, process.last_words());
+            }
+            for (slot, note) in failed {
                 tracing::warn!("{note}; the run goes on without it");
                 notes.push(note);
-                let slot = self.slots[i].expect("agent processes serve a slot");
+                let slot = slot.expect("agent processes serve a slot");
                 if self.config.restart == Restart::OnFailure
                     && !stop_sent
                     && self.restarts[slot] < MAX_RESTARTS

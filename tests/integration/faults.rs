@@ -112,7 +112,7 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
                 "--uavs",
                 "2",
                 "--episodes",
-                "3000",
+                "2000",
                 "--trials",
                 "1",
                 "--seed",

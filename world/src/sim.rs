@@ -138,7 +138,7 @@ impl TrialWorld {
                     self.begin_eval(config.eval_episodes);
                 } else if config.eval_every > 0
                     && config.eval_block > 0
-                    && self.trained % config.eval_every == 0
+                    && self.trained.is_multiple_of(config.eval_every)
                 {
                     self.begin_eval(config.eval_block);
                 }
