@@ -15,6 +15,8 @@ pub struct Process {
     child: Child,
     log: PathBuf,
     status: Option<ExitStatus>,
+    /// Peak resident set size in KiB, known once the process has exited.
+    pub peak_rss_kib: Option<u64>,
 }
 
 impl Process {
@@ -32,14 +34,41 @@ impl Process {
         let child = command
             .spawn()
             .with_context(|| format!("cannot start {name} ({:?})", command.get_program()))?;
-        Ok(Process { name: name.to_string(), child, log: log.to_path_buf(), status: None })
+        Ok(Process {
+            name: name.to_string(),
+            child,
+            log: log.to_path_buf(),
+            status: None,
+            peak_rss_kib: None,
+        })
     }
 
-    /// The exit status, once the process has exited.
+    /// The exit status, once the process has exited. Reaps it with `wait4`, which also
+    /// reports the process's peak memory.
     pub fn status(&mut self) -> Result<Option<ExitStatus>> {
         if self.status.is_none() {
-            self.status =
-                self.child.try_wait().with_context(|| format!("cannot watch {}", self.name))?;
+            let mut raw = 0;
+            // SAFETY: wait4 on our own child's pid with valid out-pointers.
+            let (reaped, usage) = unsafe {
+                let mut usage: libc::rusage = std::mem::zeroed();
+                (
+                    libc::wait4(
+                        self.child.id() as libc::pid_t,
+                        &mut raw,
+                        libc::WNOHANG,
+                        &mut usage,
+                    ),
+                    usage,
+                )
+            };
+            if reaped < 0 {
+                return Err(std::io::Error::last_os_error())
+                    .with_context(|| format!("cannot watch {}", self.name));
+            }
+            if reaped > 0 {
+                self.status = Some(std::os::unix::process::ExitStatusExt::from_raw(raw));
+                self.peak_rss_kib = Some(usage.ru_maxrss as u64);
+            }
         }
         Ok(self.status)
     }

@@ -20,6 +20,19 @@ pub struct Outcome {
     pub complete: bool,
     /// What went wrong on the way but did not stop the run (lost agents...).
     pub notes: Vec<String>,
+    /// Peak resident memory of each process of the run (name, KiB).
+    pub peak_rss_kib: Vec<(String, u64)>,
+}
+
+/// This process's own peak resident memory in KiB.
+pub fn own_peak_rss_kib() -> u64 {
+    // SAFETY: getrusage with a valid out-pointer.
+    let usage = unsafe {
+        let mut usage: libc::rusage = std::mem::zeroed();
+        libc::getrusage(libc::RUSAGE_SELF, &mut usage);
+        usage
+    };
+    usage.ru_maxrss as u64
 }
 
 pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> {
@@ -32,16 +45,18 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     let started = Instant::now();
     let result = match config.transport {
         Transport::Inproc => crate::inproc::run(config, &mut recorder, stop)
-            .map(|complete| Outcome { complete, notes: vec![] }),
+            .map(|complete| Outcome { complete, notes: vec![], peak_rss_kib: vec![] }),
         Transport::Shm => crate::shm::run(config, &mut recorder, stop),
     };
     let wall = started.elapsed().as_secs_f64();
     recorder.finish()?;
     // Whatever happened, what was collected is written before the error is reported.
-    let outcome = result
-        .as_ref()
-        .map(Outcome::clone)
-        .unwrap_or_else(|e| Outcome { complete: false, notes: vec![format!("{e:#}")] });
+    let mut outcome = result.as_ref().map(Outcome::clone).unwrap_or_else(|e| Outcome {
+        complete: false,
+        notes: vec![format!("{e:#}")],
+        peak_rss_kib: vec![],
+    });
+    outcome.peak_rss_kib.insert(0, ("supervisor".to_string(), own_peak_rss_kib()));
     write_results(config, &recorder, wall, &outcome)?;
     result
 }
@@ -109,6 +124,6 @@ fn write_results(
         config.episodes.train_episodes
     );
     plot_curves(&config.out.join("curve.svg"), &title, &series, &references)?;
-    let value = summary::summary(config, recorder, wall, outcome.complete, &outcome.notes);
+    let value = summary::summary(config, recorder, wall, outcome);
     summary::write(&config.out.join("summary.json"), &value)
 }

@@ -54,6 +54,8 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     let forced = shut_down(&mut fleet.processes, grace)?;
     cleanup_run(&config.run_id).context("removing the run's shared-memory resources")?;
     let mut outcome = result?;
+    outcome.peak_rss_kib =
+        fleet.processes.iter().filter_map(|p| Some((p.name.clone(), p.peak_rss_kib?))).collect();
     if !forced.is_empty() {
         outcome.notes.push(format!("had to signal {} to stop", forced.join(", ")));
     }
@@ -115,7 +117,7 @@ impl Fleet<'_> {
                         self.processes[0].last_words()
                     );
                 }
-                return Ok(Outcome { complete: !stop_sent, notes });
+                return Ok(Outcome { complete: !stop_sent, notes, peak_rss_kib: vec![] });
             }
             reported.resize(self.processes.len(), false);
             let mut failed = Vec::new();

@@ -5,6 +5,7 @@
 
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
+use crate::run::Outcome;
 use anyhow::{Context, Result};
 use flockstep_world::optimum::{optimum, optimum_with_known_target};
 use serde_json::{json, Value};
@@ -17,8 +18,7 @@ pub fn summary(
     config: &RunConfig,
     recorder: &Recorder,
     wall_seconds: f64,
-    complete: bool,
-    notes: &[String],
+    outcome: &Outcome,
 ) -> Value {
     let collector = recorder.collector();
     let agents = collector.agents();
@@ -30,8 +30,9 @@ pub fn summary(
         "iceoryx2_version": "0.10",
         "run_id": config.run_id,
         "transport": format!("{:?}", config.transport).to_lowercase(),
-        "complete": complete,
-        "notes": notes,
+        "complete": outcome.complete,
+        "notes": outcome.notes,
+        "peak_rss_kib": outcome.peak_rss_kib.iter().map(|(name, kib)| json!({ "process": name, "kib": kib })).collect::<Vec<_>>(),
         "scenario": config.scenario_arg,
         "scenario_name": config.scenario.name(),
         "seed": config.seed,
