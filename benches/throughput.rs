@@ -288,9 +288,14 @@ fn figures(repetition: &Repetition, configs: &[Config]) -> Vec<Figure> {
     };
     let ratio = |name, trials, value, target| Figure { kind: "ratio", name, trials, value, target };
     let mut figures = Vec::new();
+    let raw = &repetition.raw;
     for trials in TRIALS {
-        let value = find(Transport::Shm, trials).rounds_per_s() / repetition.raw.rate();
+        let shm = find(Transport::Shm, trials);
+        let value = shm.rounds_per_s() / raw.rate();
         figures.push(ratio("shm_rounds_vs_raw_barrier", trials.to_string(), value, Some(0.8)));
+        // CPU per round of every process together: less sensitive to foreign load.
+        let value = shm.cpu_us_per_round() / (raw.cpu_us / raw.rounds.max(1) as f64);
+        figures.push(ratio("shm_cpu_per_round_vs_raw_barrier", trials.to_string(), value, None));
     }
     let [one, four] = TRIALS.map(|trials| find(Transport::Shm, trials));
     let trials = format!("{}/{}", TRIALS[1], TRIALS[0]);

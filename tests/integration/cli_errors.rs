@@ -2,7 +2,7 @@
 //! more UAVs than routes, a results directory that cannot be written. Each gives one clear
 //! error line naming the problem and a non-zero exit, for both transports.
 
-use crate::harness::{run_fail, scratch, SUPERVISOR};
+use crate::harness::{assert_nothing_left, run_fail, run_id, scratch, SUPERVISOR};
 
 /// Runs the supervisor expecting failure; returns its stderr, checked to be one line.
 fn error_line(args: &[&str]) -> String {
@@ -17,13 +17,15 @@ fn error_line(args: &[&str]) -> String {
 fn for_both_transports(args: &[&str], expected: &[&str]) {
     let dir = scratch();
     let out = dir.path().join("out").display().to_string();
+    let id = run_id("bad-input");
     for transport in ["inproc", "shm"] {
         let mut all = args.to_vec();
-        all.extend(["--transport", transport, "--out", &out, "--episodes", "10", "--quiet"]);
+        all.extend(["--transport", transport, "--out", &out, "--episodes", "10", "--quiet", "--run-id", &id]);
         let line = error_line(&all);
         for word in expected {
             assert!(line.contains(word), "`{line}` should mention `{word}` ({transport})");
         }
+        assert_nothing_left(&id);
     }
 }
 
@@ -70,9 +72,11 @@ fn results_directory_that_cannot_be_written() {
     let file = dir.path().join("a-file");
     std::fs::write(&file, b"").expect("write a file");
     let out = file.join("results").display().to_string();
+    let id = run_id("unwritable");
     for transport in ["inproc", "shm"] {
         let line =
-            error_line(&["--transport", transport, "--out", &out, "--episodes", "10", "--quiet"]);
+            error_line(&["--transport", transport, "--out", &out, "--episodes", "10", "--quiet", "--run-id", &id]);
         assert!(line.contains("results directory") && line.contains(&out), "{line}");
+        assert_nothing_left(&id);
     }
 }
