@@ -488,7 +488,7 @@ impl Bench {
     }
 
     /// The number of training episodes for about `seconds` of work (start-up excluded):
-    /// runs 4 times more episodes each time until a run takes an eighth of that, then
+    /// runs 4 times more episodes each time until a run takes a quarter of that, then
     /// extrapolates with the time per episode between the last two runs (episodes get
     /// shorter as the UAVs learn, so the last stretch is the best guess for what follows).
     fn calibrate(&mut self, config: &Config, seconds: f64) -> Result<u64, Error> {
@@ -497,7 +497,7 @@ impl Bench {
         let mut episodes = FIRST_PROBE;
         loop {
             let took = (self.run(config, episodes)?.wall - startup).max(1e-3);
-            if took >= seconds / 8.0 {
+            if took >= seconds / 4.0 {
                 let (e, t) = previous;
                 let per_episode = if took > t { (took - t) / (episodes as f64 - e) } else { 0.0 };
                 // Without a usable slope (noise), scale the whole run.

@@ -20,7 +20,17 @@ fn for_both_transports(args: &[&str], expected: &[&str]) {
     let id = run_id("bad-input");
     for transport in ["inproc", "shm"] {
         let mut all = args.to_vec();
-        all.extend(["--transport", transport, "--out", &out, "--episodes", "10", "--quiet", "--run-id", &id]);
+        all.extend([
+            "--transport",
+            transport,
+            "--out",
+            &out,
+            "--episodes",
+            "10",
+            "--quiet",
+            "--run-id",
+            &id,
+        ]);
         let line = error_line(&all);
         for word in expected {
             assert!(line.contains(word), "`{line}` should mention `{word}` ({transport})");
@@ -74,8 +84,17 @@ fn results_directory_that_cannot_be_written() {
     let out = file.join("results").display().to_string();
     let id = run_id("unwritable");
     for transport in ["inproc", "shm"] {
-        let line =
-            error_line(&["--transport", transport, "--out", &out, "--episodes", "10", "--quiet", "--run-id", &id]);
+        let line = error_line(&[
+            "--transport",
+            transport,
+            "--out",
+            &out,
+            "--episodes",
+            "10",
+            "--quiet",
+            "--run-id",
+            &id,
+        ]);
         assert!(line.contains("results directory") && line.contains(&out), "{line}");
         assert_nothing_left(&id);
     }
