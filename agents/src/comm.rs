@@ -230,10 +230,6 @@ impl CommState {
         &self.words
     }
 
-    pub fn mode(&self) -> CommMode {
-        self.mode
-    }
-
     /// `flags`: entry k of peer `peer`'s vector. `compact`: entry k (candidate k) of the
     /// fused vector, `peer` ignored. `None` unknown, `Some(false)` 0 / ruled out,
     /// `Some(true)` 1 / confirmed.

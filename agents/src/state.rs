@@ -46,14 +46,6 @@ impl StateSpace {
         &self.keys
     }
 
-    pub fn len(&self) -> usize {
-        self.keys.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.keys.is_empty()
-    }
-
     /// Rebuilds from keys in id order (a snapshot).
     pub fn from_keys(keys: Vec<Box<[u64]>>) -> Result<StateSpace, String> {
         let mut space = StateSpace::default();

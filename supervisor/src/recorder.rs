@@ -94,8 +94,4 @@ impl Recorder {
     pub fn env_steps(&self) -> u64 {
         self.env_steps
     }
-
-    pub fn live(&self) -> usize {
-        self.live
-    }
 }

@@ -165,11 +165,6 @@ impl Collector {
         self.train_truncated.get(agent).copied().unwrap_or(0)
     }
 
-    /// Training episodes recorded so far, over every trial (agent 1's count).
-    pub fn train_episodes(&self) -> u64 {
-        self.train.first().map(|t| t.iter().map(|e| e.len() as u64).sum()).unwrap_or(0)
-    }
-
     /// Mean over trials of each trial's mean of its last `window` training episodes.
     pub fn final_mean(&self, agent: usize, window: usize) -> Option<f64> {
         let trials = self.train.get(agent)?;

@@ -290,10 +290,6 @@ impl TrialWorld {
         self.members &= !(1 << slot);
         self.joining &= !(1 << slot);
     }
-
-    pub fn episode_tick(&self) -> u32 {
-        self.episode_tick
-    }
 }
 
 /// Every trial of a run: the world's side of the barrier.
@@ -405,10 +401,6 @@ impl World {
         self.trials.iter().all(TrialWorld::is_done)
     }
 
-    pub fn round(&self) -> u64 {
-        self.round
-    }
-
     /// Agent slots in the barrier.
     pub fn live(&self) -> u64 {
         self.live
@@ -440,9 +432,5 @@ impl World {
         for trial in &mut self.trials {
             trial.remove(slot);
         }
-    }
-
-    pub fn trials(&self) -> &[TrialWorld] {
-        &self.trials
     }
 }

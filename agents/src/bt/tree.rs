@@ -217,10 +217,6 @@ impl Tree {
         }
     }
 
-    pub fn params(&self) -> LearnParams {
-        self.params
-    }
-
     pub fn set_params(&mut self, params: LearnParams) {
         self.params = params;
     }
