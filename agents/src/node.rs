@@ -27,7 +27,7 @@ use flockstep_proto::{Action, JoinRequest, ObservationKind, RunInfo, ANY_SLOT};
 use flockstep_world::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Tree and learning options shared by `agent run` and `agent --attach`.
 #[derive(Debug, Clone, Args)]
@@ -183,11 +183,14 @@ fn serve(
             libc::signal(libc::SIGTERM, libc::SIG_IGN);
         }
     }
-    let nonce = join_nonce();
-    let slot_asked = wanted.map_or(ANY_SLOT, |s| s as u32);
-    ports.send_join(&JoinRequest { nonce, pid: std::process::id(), slot: slot_asked })?;
+    let request = JoinRequest {
+        nonce: join_nonce(),
+        pid: std::process::id(),
+        slot: wanted.map_or(ANY_SLOT, |s| s as u32),
+    };
     let world_timeout = Duration::from_millis(learner.world_timeout_ms);
-    let (slot, first) = await_admission(&ports, nonce, world_timeout)?;
+    let (slot, first) = await_admission(&ports, &request, world_timeout)?;
+    let nonce = request.nonce;
     let setup = match setup {
         Some(setup) => setup,
         None => read_run_info(&ports, world_timeout)?,
@@ -250,21 +253,37 @@ fn join_nonce() -> u64 {
     (u64::from(std::process::id()) << 32 ^ nanos) | 1
 }
 
-/// Waits for the world to give this agent a slot (or to refuse it); returns the slot and
-/// the observation that admitted it, which is the first round the agent must answer.
+/// How long an agent refused its own slot waits before it asks again.
+const REJOIN_PAUSE: Duration = Duration::from_millis(50);
+
+/// Asks the world for a slot and waits for its answer; returns the slot and the observation
+/// that admitted the agent, which is the first round it must answer. An agent asking for
+/// any free route is refused if there is none; one asking for its own slot (a restart) asks
+/// again until the world has dropped its dead predecessor, within `timeout`.
 fn await_admission(
     ports: &AgentPorts,
-    nonce: u64,
+    request: &JoinRequest,
     timeout: Duration,
 ) -> Result<(usize, ObservationSample)> {
+    ports.send_join(request)?;
+    let mut asked = Instant::now();
+    let mut refused = false;
     ports
         .waiter()
         .wait(&"admission by the world", timeout, || {
+            // Not every round: the world logs each refusal.
+            if refused && asked.elapsed() >= REJOIN_PAUSE {
+                ports.send_join(request)?;
+                (asked, refused) = (Instant::now(), false);
+            }
             while let Some(sample) = ports.try_observation()? {
-                if sample.refused_nonce == nonce {
-                    return Err(TransportError::Refused { run: ports.run_id().to_string() });
+                if sample.refused_nonce == request.nonce {
+                    if request.slot == ANY_SLOT {
+                        return Err(TransportError::Refused { run: ports.run_id().to_string() });
+                    }
+                    refused = true;
                 }
-                if let Some(slot) = sample.owners.iter().position(|&n| n == nonce) {
+                if let Some(slot) = sample.owners.iter().position(|&n| n == request.nonce) {
                     return Ok(Some((slot, sample)));
                 }
             }

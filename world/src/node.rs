@@ -208,7 +208,8 @@ impl WorldNode {
                     self.members.refused = request.nonce;
                     tracing::warn!(
                         pid = request.pid,
-                        "join refused: every route of the scenario is taken"
+                        slot = request.slot,
+                        "join refused: no such free route"
                     );
                 }
             }

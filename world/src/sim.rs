@@ -406,14 +406,15 @@ impl World {
         self.live
     }
 
-    /// The slot an agent asking for `wanted` (None: any) gets: that slot if its route is
-    /// free, else the first free route; None if every route is taken.
+    /// The slot an agent asking for `wanted` gets: that slot if its route is free (an agent
+    /// asking for its own slot must fly that route: its snapshots are for it); with None,
+    /// the first free route. None if there is no such route.
     pub fn free_slot(&self, wanted: Option<usize>) -> Option<usize> {
         let routes = self.trials.first().map_or(0, |t| t.poses.len()).min(MAX_AGENTS);
-        let free = |slot: usize| slot < routes && self.live & (1 << slot) == 0;
+        let free = |slot: &usize| *slot < routes && self.live & (1 << slot) == 0;
         match wanted {
-            Some(slot) if free(slot) => Some(slot),
-            _ => (0..routes).find(|&slot| free(slot)),
+            Some(slot) => Some(slot).filter(free),
+            None => (0..routes).find(free),
         }
     }
 
