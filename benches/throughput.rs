@@ -27,8 +27,10 @@ mod raw_barrier;
 
 use flockstep_proto::transport::{leftover_files, WaitPolicy};
 use flockstep_proto::MAX_AGENTS;
+use flockstep_supervisor::config::default_scenario;
 use flockstep_world::Scenario;
 use raw_barrier::{children_cpu_us, load1, measure, Error, Measurement};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -37,8 +39,11 @@ use std::time::Instant;
 const TRIALS: [usize; 2] = [1, 4];
 /// Training episodes of a smoke run (no calibration).
 const SMOKE_EPISODES: u64 = 20;
-/// Episodes of the first calibration run; each next one has 4 times more.
-const FIRST_PROBE: u64 = 64;
+/// Episodes of the first in-process run that maps episodes to rounds; each next one has 4
+/// times more.
+const FIRST_PROBE: f64 = 64.0;
+/// Rounds of the first calibration run of a configuration; each next one has 4 times more.
+const FIRST_PROBE_ROUNDS: f64 = 10_000.0;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -96,7 +101,7 @@ fn parent(args: &[String]) -> Result<(), Error> {
     let options = Options::parse(args)?;
     let mut bench = Bench::new(options.full)?;
     for &uavs in &options.uavs {
-        let scenario = options.scenario.clone().unwrap_or_else(|| default_scenario(uavs).into());
+        let scenario = options.scenario.clone().unwrap_or_else(|| default_scenario(uavs));
         let routes = Scenario::resolve(&scenario)
             .map_err(|e| format!("--scenario {scenario}: {e}"))?
             .n_routes();
@@ -110,16 +115,6 @@ fn parent(args: &[String]) -> Result<(), Error> {
         compare(&mut bench, &options, uavs, &scenario)?;
     }
     Ok(())
-}
-
-/// The supervisor's own default (`flockstep_supervisor::config::default_scenario`), spelled
-/// out for the skip check and the output lines.
-fn default_scenario(uavs: usize) -> &'static str {
-    if uavs == 1 {
-        "s2"
-    } else {
-        "s3"
-    }
 }
 
 /// Measures every configuration for `uavs` agents, interleaved, and prints the medians and
@@ -235,7 +230,7 @@ fn print_product(sorted: &[&Product], config: &Config) {
          rounds_per_s={:.0} env_steps_per_s={:.0} min={:.0} max={:.0} \
          summary_rounds_per_s={:.0} summary_env_steps_per_s={:.0} wall_s={:.3} startup_s={:.3} \
          startup_process_s={:.3} process_s={:.3} cpu_us_per_round={:.2} occupancy={:.3} \
-         repeats={} load1={:.2} leftover_files={}",
+         startup_subtracted={} repeats={} load1={:.2} leftover_files={}",
         config.transport.name(),
         config.uavs,
         config.trials,
@@ -255,6 +250,7 @@ fn print_product(sorted: &[&Product], config: &Config) {
         run.process,
         median.cpu_us_per_round(),
         run.env_steps as f64 / (run.rounds * (config.trials * config.uavs) as u64).max(1) as f64,
+        sorted.iter().all(|p| p.subtracted),
         sorted.len(),
         run.load1,
         sorted.iter().map(|p| p.startup.leftover + p.run.leftover).sum::<usize>(),
@@ -336,6 +332,7 @@ impl Transport {
 }
 
 /// One configuration of the product.
+#[derive(Clone)]
 struct Config {
     transport: Transport,
     uavs: usize,
@@ -363,6 +360,9 @@ struct Product {
     episodes: u64,
     startup: Run,
     run: Run,
+    /// False if the start-up could not be subtracted: noise made the one-episode run the
+    /// longer, which only a smoke run is short enough for. The whole run counts then.
+    subtracted: bool,
 }
 
 impl Product {
@@ -376,25 +376,25 @@ impl Product {
             )
             .into());
         }
-        Ok(Product { episodes, startup, run })
+        let subtracted = run.wall > startup.wall;
+        Ok(Product { episodes, startup, run, subtracted })
     }
 
-    /// The time of the rounds beyond the one-episode run; only a smoke run is short enough
-    /// for noise to make it vanish.
-    fn seconds(&self) -> f64 {
-        (self.run.wall - self.startup.wall).max(1e-6)
+    /// `figure` of the run minus that of the one-episode run (if subtracted).
+    fn beyond(&self, figure: impl Fn(&Run) -> f64) -> f64 {
+        figure(&self.run) - if self.subtracted { figure(&self.startup) } else { 0.0 }
     }
 
     fn rounds_per_s(&self) -> f64 {
-        (self.run.rounds - self.startup.rounds) as f64 / self.seconds()
+        self.beyond(|r| r.rounds as f64) / self.beyond(|r| r.wall)
     }
 
     fn env_steps_per_s(&self) -> f64 {
-        self.run.env_steps.saturating_sub(self.startup.env_steps) as f64 / self.seconds()
+        self.beyond(|r| r.env_steps as f64) / self.beyond(|r| r.wall)
     }
 
     fn cpu_us_per_round(&self) -> f64 {
-        (self.run.cpu_us - self.startup.cpu_us) / (self.run.rounds - self.startup.rounds) as f64
+        self.beyond(|r| r.cpu_us) / self.beyond(|r| r.rounds as f64)
     }
 }
 
@@ -404,6 +404,16 @@ struct Bench {
     /// Results directories of the runs, removed on drop.
     out: tempfile::TempDir,
     runs: usize,
+    /// Rounds by training episodes of each (UAVs, trials, scenario), from in-process runs.
+    curves: HashMap<(usize, usize, String), Vec<CurvePoint>>,
+}
+
+/// One in-process run of the calibration.
+#[derive(Clone, Copy)]
+struct CurvePoint {
+    episodes: f64,
+    rounds: f64,
+    seconds: f64,
 }
 
 impl Bench {
@@ -430,7 +440,7 @@ impl Bench {
             )
             .into());
         }
-        Ok(Bench { supervisor, out: tempfile::tempdir()?, runs: 0 })
+        Ok(Bench { supervisor, out: tempfile::tempdir()?, runs: 0, curves: HashMap::new() })
     }
 
     /// One supervisor run of `config` training `episodes` episodes per trial.
@@ -487,35 +497,59 @@ impl Bench {
         Ok(run)
     }
 
-    /// The number of training episodes for about `seconds` of work (start-up excluded):
-    /// runs 4 times more episodes each time until a run takes a quarter of that, then
-    /// extrapolates with the time per episode between the last two runs (episodes get
-    /// shorter as the UAVs learn, so the last stretch is the best guess for what follows).
+    /// Training episodes for about `seconds` of work of `config`, start-up excluded. Its rate
+    /// in rounds/s comes from probe runs of 4 times more rounds each, until one takes an
+    /// eighth of that; the episodes for the rounds wanted then come from
+    /// [`Bench::episodes_for`]. (Episodes shorten as the UAVs learn: a time per episode
+    /// measured early would not extrapolate.)
     fn calibrate(&mut self, config: &Config, seconds: f64) -> Result<u64, Error> {
-        let startup = self.run(config, 1)?.wall;
-        let mut previous = (0.0, 0.0);
-        let mut episodes = FIRST_PROBE;
+        let startup = self.run(config, 1)?;
+        let mut rounds = FIRST_PROBE_ROUNDS;
         loop {
-            let took = (self.run(config, episodes)?.wall - startup).max(1e-3);
-            if took >= seconds / 4.0 {
-                let (e, t) = previous;
-                let per_episode = if took > t { (took - t) / (episodes as f64 - e) } else { 0.0 };
-                // Without a usable slope (noise), scale the whole run.
-                let per_episode =
-                    if per_episode > 0.0 { per_episode } else { took / episodes as f64 };
-                let target = episodes as f64 + (seconds - took).max(0.0) / per_episode;
+            let episodes = self.episodes_for(config, rounds, seconds)?;
+            let probe = self.run(config, episodes)?;
+            let took = probe.wall - startup.wall;
+            if took >= seconds / 8.0 {
+                let rate = probe.rounds.saturating_sub(startup.rounds) as f64 / took;
+                let episodes = self.episodes_for(config, rate * seconds, seconds)?;
                 eprintln!(
-                    "throughput calibrate what={} uavs={} trials={} probe_episodes={episodes} \
-                     probe_s={took:.3} us_per_episode={:.1} episodes={target:.0}",
+                    "throughput calibrate what={} uavs={} trials={} probe_rounds={} \
+                     probe_s={took:.3} rounds_per_s={rate:.0} episodes={episodes}",
                     config.transport.name(),
                     config.uavs,
                     config.trials,
-                    per_episode * 1e6
+                    probe.rounds,
                 );
-                return Ok(target.round() as u64);
+                return Ok(episodes);
             }
-            previous = (episodes as f64, took);
-            episodes *= 4;
+            rounds *= 4.0;
         }
+    }
+
+    /// The training episodes of a run of about `rounds` rounds. A number of episodes takes
+    /// the same rounds with either transport (same seeds, same `World`), so they are looked
+    /// up with fast in-process runs of 4 times more episodes each and interpolated on a
+    /// log-log scale; past the first run that takes a quarter of `seconds`, extrapolated.
+    fn episodes_for(&mut self, config: &Config, rounds: f64, seconds: f64) -> Result<u64, Error> {
+        let inproc = Config { transport: Transport::Inproc, ..config.clone() };
+        let key = (config.uavs, config.trials, config.scenario.clone());
+        loop {
+            let points = self.curves.entry(key.clone()).or_default();
+            let last = points.last().copied();
+            let covered = last.is_some_and(|p| p.rounds >= rounds || p.seconds >= seconds / 4.0);
+            if covered && points.len() >= 2 {
+                break;
+            }
+            let episodes = last.map_or(FIRST_PROBE, |p| p.episodes * 4.0);
+            let run = self.run(&inproc, episodes as u64)?;
+            let point = CurvePoint { episodes, rounds: run.rounds as f64, seconds: run.wall };
+            self.curves.entry(key.clone()).or_default().push(point);
+        }
+        let points = &self.curves[&key];
+        // The first point at or past `rounds` (else the last) and the one before it.
+        let i = points.iter().position(|p| p.rounds >= rounds).unwrap_or(points.len() - 1).max(1);
+        let (a, b) = (points[i - 1], points[i]);
+        let fraction = (rounds / a.rounds).ln() / (b.rounds / a.rounds).ln();
+        Ok((a.episodes * (b.episodes / a.episodes).powf(fraction)).round().max(2.0) as u64)
     }
 }

@@ -52,17 +52,10 @@ enum BtCommand {
     },
 }
 
-/// The `agent` binary.
-pub fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
-                .unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
-    let cli = Cli::parse();
+/// The `agent` program: `args` are its command line (program name first).
+pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process::ExitCode {
+    flockstep_proto::logging::init("warn");
+    let cli = Cli::parse_from(args);
     let result = match (cli.command, cli.attach) {
         (Some(Command::Bt { command: BtCommand::Show { tree } }), _) => show(&tree),
         (Some(Command::Bt { command: BtCommand::Replay { tree, script, seed } }), _) => {

@@ -13,6 +13,7 @@
 pub mod agent_to_world;
 pub mod flags;
 pub mod limits;
+pub mod logging;
 pub mod pose;
 pub mod seed;
 pub mod services;

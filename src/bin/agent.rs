@@ -1,3 +1,3 @@
 fn main() -> std::process::ExitCode {
-    flockstep_agents::cli::main()
+    flockstep_agents::cli::main(std::env::args_os())
 }

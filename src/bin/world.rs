@@ -1,3 +1,3 @@
 fn main() -> std::process::ExitCode {
-    flockstep_world::node::main()
+    flockstep_world::node::main(std::env::args_os())
 }

@@ -20,20 +20,25 @@ use cli::{Cli, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// First argument that makes the supervisor's executable the world or an agent.
+pub const ROLE_WORLD: &str = "world";
+pub const ROLE_AGENT: &str = "agent";
+
 /// Exit status of a run stopped by Ctrl-C / SIGTERM (results written, flagged partial).
 pub const EXIT_INTERRUPTED: i32 = 130;
 
-/// The `supervisor` binary.
+/// The `supervisor` binary. It is also the world and the agent programs (`supervisor world
+/// ...`, `supervisor agent ...`): it starts its children from its own executable, so
+/// building the supervisor alone (`cargo run --bin supervisor`) is enough to run.
 pub fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
-                .unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
-    let cli = Cli::parse();
+    let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    match args.get(1).and_then(|a| a.to_str()) {
+        Some(ROLE_WORLD) => return flockstep_world::node::main(args.drain(1..)),
+        Some(ROLE_AGENT) => return flockstep_agents::cli::main(args.drain(1..)),
+        _ => {}
+    }
+    flockstep_proto::logging::init("warn");
+    let cli = Cli::parse_from(args);
     match dispatch(cli) {
         Ok(code) => std::process::ExitCode::from(code),
         Err(e) => {

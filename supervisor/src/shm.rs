@@ -19,7 +19,6 @@ use flockstep_proto::transport::{
     cleanup_run, sweep_stale_runs, RunConfig as RunIdentity, RunServices, SignalMode,
     SupervisorPorts, TransportError,
 };
-use std::path::PathBuf;
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -156,15 +155,17 @@ impl Fleet<'_> {
     }
 }
 
-fn sibling(name: &str) -> Result<PathBuf> {
+/// A command running this executable in `role` (the supervisor is also the world and the
+/// agent program, see [`crate::main`]).
+fn own_executable(role: &str) -> Result<Command> {
     let me = std::env::current_exe().context("cannot find the supervisor's own executable")?;
-    let path = me.with_file_name(name);
-    anyhow::ensure!(path.exists(), "the `{name}` executable is missing next to {}", me.display());
-    Ok(path)
+    let mut command = Command::new(me);
+    command.arg(role);
+    Ok(command)
 }
 
 fn world_command(config: &RunConfig) -> Result<Command> {
-    let mut command = Command::new(sibling("world")?);
+    let mut command = own_executable(crate::ROLE_WORLD)?;
     command
         .arg("--run-id")
         .arg(&config.run_id)
@@ -188,7 +189,7 @@ fn world_command(config: &RunConfig) -> Result<Command> {
 }
 
 fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Command> {
-    let mut command = Command::new(sibling("agent")?);
+    let mut command = own_executable(crate::ROLE_AGENT)?;
     command
         .arg("run")
         .arg("--run-id")

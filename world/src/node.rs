@@ -70,17 +70,10 @@ pub struct WorldArgs {
     pub parent_pid: Option<u32>,
 }
 
-/// The `world` binary.
-pub fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("FLOCKSTEP_LOG")
-                .unwrap_or_else(|_| "info".into()),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
-    match run(&WorldArgs::parse()) {
+/// The `world` process: `args` are its command line (program name first).
+pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process::ExitCode {
+    flockstep_proto::logging::init("info");
+    match run(&WorldArgs::parse_from(args)) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("world: error: {e:#}");
