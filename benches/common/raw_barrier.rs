@@ -82,20 +82,29 @@ impl ChildArgs {
     }
 }
 
+/// Writes what the agents read of a round, as the product's world does (only the parts in
+/// use, straight into the shared-memory sample).
+fn header(out: &mut Observation, round: &Observation) {
+    out.round = round.round;
+    out.live = round.live;
+    out.kind = round.kind;
+    out.n_trials = round.n_trials;
+}
+
 fn child_world(args: &[String]) -> Result<(), Error> {
     let args = ChildArgs::parse(args)?;
     let world = RunServices::create(&args.run_config()?)?.into_world()?;
     world.wait_for_peers(args.agents, false, START_TIMEOUT)?;
     // One bit per agent slot; `agents` is 1..=64.
     let all = u64::MAX >> (64 - args.agents);
-    let mut observation = Box::new(Observation { live: all, ..Observation::default() });
+    let mut observation = Observation { live: all, ..Observation::default() };
     let duration = Duration::from_millis(args.value);
     let mut round_trips = Vec::with_capacity(1 << 20);
     let start = Instant::now();
     while start.elapsed() < duration {
         let round = observation.round;
         let sent = Instant::now();
-        world.publish_observation(&observation)?;
+        world.publish_observation(|o| header(o, &observation))?;
         let mut pending = all;
         world.waiter().wait(&format_args!("actions of round {round}"), ROUND_TIMEOUT, || {
             while let Some(action) = world.try_action()? {
@@ -110,7 +119,7 @@ fn child_world(args: &[String]) -> Result<(), Error> {
     }
     let seconds = start.elapsed().as_secs_f64();
     observation.kind = ObservationKind::Stop as u8;
-    world.publish_observation(&observation)?;
+    world.publish_observation(|o| header(o, &observation))?;
     round_trips.sort_unstable();
     let percentile =
         |p: usize| round_trips.get(round_trips.len() * p / 100).map_or(0, |ns| ns / 1000);

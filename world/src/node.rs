@@ -15,7 +15,7 @@ use clap::Parser;
 use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SignalMode, TransportError, WorldPorts,
 };
-use flockstep_proto::{JoinRequest, Observation, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
+use flockstep_proto::{JoinRequest, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -231,31 +231,37 @@ impl WorldNode {
     /// Runs rounds until every trial is done or the supervisor asks to stop, then tells the
     /// agents to stop and waits for each one's last answer (its snapshots are written then).
     fn barrier(&mut self) -> Result<()> {
-        let mut observation = Box::<Observation>::default();
         let mut reports = Vec::new();
         let mut stop_requested = false;
         loop {
             self.admit_joiners()?;
-            self.world.observe(&mut observation);
-            observation.owners = self.members.owners;
-            observation.refused_nonce = std::mem::take(&mut self.members.refused);
-            if stop_requested {
-                observation.kind = ObservationKind::Stop as u8;
-            }
-            self.ports.publish_observation(&observation)?;
-            let stopping = observation.kind == ObservationKind::Stop as u8;
+            let Self { world, ports, members, .. } = &mut *self;
+            let mut round = Round::default();
+            ports.publish_observation(|observation| {
+                world.observe(observation);
+                observation.owners = members.owners;
+                observation.refused_nonce = std::mem::take(&mut members.refused);
+                if stop_requested {
+                    observation.kind = ObservationKind::Stop as u8;
+                }
+                round = Round {
+                    number: observation.round,
+                    live: observation.live,
+                    kind: observation.kind,
+                };
+            })?;
+            let stopping = round.kind == ObservationKind::Stop as u8;
             // The agents' last answer comes after their snapshots: allow for writing them.
             let timeout = if stopping {
                 self.agent_timeout.max(Duration::from_secs(30))
             } else {
                 self.agent_timeout
             };
-            let answered =
-                self.collect_actions(&observation, timeout, &mut stop_requested, !stopping)?;
+            let answered = self.collect_actions(round, timeout, &mut stop_requested, !stopping)?;
             if stopping {
                 return Ok(());
             }
-            for slot in slots(observation.live & !answered.answered) {
+            for slot in slots(round.live & !answered.answered) {
                 let why = if answered.gone & (1 << slot) != 0 {
                     "its process is gone"
                 } else {
@@ -273,20 +279,19 @@ impl WorldNode {
         }
     }
 
-    /// Waits for the answer of every live agent to `observation`'s round and applies them
+    /// Waits for the answer of every live agent to `this_round` and applies them
     /// (unless `apply` is false: the answers to a stop). Answers to other rounds, from slots
     /// not in the barrier, or that fail the checks are logged and dropped. Ends early when
     /// every agent still missing is known to be dead; ends at `timeout` otherwise.
     fn collect_actions(
         &mut self,
-        observation: &Observation,
+        this_round: Round,
         timeout: Duration,
         stop_requested: &mut bool,
         apply: bool,
     ) -> Result<Answers> {
         let Self { world, ports, members, .. } = self;
-        let round = observation.round;
-        let live = observation.live;
+        let (round, live) = (this_round.number, this_round.live);
         let started = Instant::now();
         let mut answers = Answers::default();
         let waited =
@@ -341,6 +346,14 @@ impl WorldNode {
             Err(e) => Err(e.into()),
         }
     }
+}
+
+/// What the world keeps of a round it published.
+#[derive(Debug, Default, Clone, Copy)]
+struct Round {
+    number: u64,
+    live: u64,
+    kind: u8,
 }
 
 /// Who answered a round, and who is known to be dead.

@@ -23,7 +23,7 @@ pub const SPARE: usize = 4;
 /// Nodes one run may hold: every agent, the world, the supervisor and the spares.
 pub const MAX_NODES: usize = MAX_AGENTS + 2 + SPARE;
 /// Episode records the supervisor's buffer holds before the world has to wait for it.
-pub const EPISODE_BUFFER: usize = 1024;
+pub const EPISODE_BUFFER: usize = 8192;
 /// Pause between attempts while the world has not created a service yet.
 const OPEN_RETRY: Duration = Duration::from_millis(5);
 
