@@ -252,7 +252,7 @@ impl WorldPorts {
         // `EPISODE_WAKE_EVERY`-th record and otherwise drains the buffer on its own schedule.
         let published = self.episodes_published.get() + 1;
         self.episodes_published.set(published);
-        if published % EPISODE_WAKE_EVERY == 0 {
+        if published.is_multiple_of(EPISODE_WAKE_EVERY) {
             self.wake_supervisor.notify().map_err(|e| self.err(WAKE_SUPERVISOR, "notifying", e))?;
         }
         Ok(())
