@@ -22,8 +22,9 @@ fn run(test: &str) -> RunConfig {
     config
 }
 
-fn observation(round: u64) -> Box<Observation> {
-    Box::new(Observation { round, ..Observation::default() })
+/// Writes round `round` into a published sample, as the world does.
+fn observation(round: u64) -> impl FnOnce(&mut Observation) {
+    move |o| o.round = round
 }
 
 #[test]
@@ -34,7 +35,7 @@ fn world_agent_and_supervisor_exchange_every_message() {
     let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     world.wait_for_peers(1, true, BOUND).unwrap();
 
-    world.publish_observation(&observation(7)).unwrap();
+    world.publish_observation(observation(7)).unwrap();
     let round = agent
         .waiter()
         .wait(&"observation of round 7", BOUND, || Ok(agent.try_observation()?.map(|o| o.round)))
@@ -102,7 +103,7 @@ fn bad_run_ids_are_errors_not_panics() {
 fn a_late_agent_gets_the_current_round_from_history() {
     let config = run("history");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
-    world.publish_observation(&observation(3)).unwrap();
+    world.publish_observation(observation(3)).unwrap();
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
     // History reaches a new subscriber when the publisher updates its connections.
     world.serve_late_joiners().unwrap();
@@ -136,7 +137,7 @@ fn nothing_of_a_run_is_left_after_every_process_dropped_its_ports() {
         let world = RunServices::create(&config).unwrap().into_world().unwrap();
         let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
         let _supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
-        world.publish_observation(&observation(1)).unwrap();
+        world.publish_observation(observation(1)).unwrap();
         agent.publish_action(&Action::new(0)).unwrap();
         let during = leftover_files(&config.run_id).unwrap();
         assert!(
