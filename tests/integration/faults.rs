@@ -23,6 +23,11 @@ impl Lcg {
     }
 }
 
+/// The words of `text`: long argument lists read better as one string.
+fn words(text: &str) -> Vec<&str> {
+    text.split_whitespace().collect()
+}
+
 fn run_args<'a>(id: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec!["--transport", "shm", "--run-id", id, "--out", out, "--quiet"];
     args.extend_from_slice(extra);
@@ -106,18 +111,7 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
         let run = Supervised::start(&run_args(
             &id,
             &out,
-            &[
-                "--scenario",
-                "s3",
-                "--uavs",
-                "2",
-                "--episodes",
-                "2000",
-                "--trials",
-                "1",
-                "--seed",
-                "51",
-            ],
+            &words("--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 51"),
         ));
         let victim = format!("--run-id {id} --uav 2");
         wait_until("UAV2 to start", Duration::from_secs(30), || !pids_with(&victim).is_empty());
@@ -147,22 +141,7 @@ fn a_restarted_agent_goes_on_from_its_snapshot() {
     let run = Supervised::start(&run_args(
         &id,
         &out,
-        &[
-            "--scenario",
-            "s3",
-            "--uavs",
-            "2",
-            "--episodes",
-            "12000",
-            "--trials",
-            "1",
-            "--seed",
-            "61",
-            "--restart",
-            "on-failure",
-            "--snapshot-every",
-            "200",
-        ],
+        &words("--scenario s3 --uavs 2 --episodes 12000 --trials 1 --seed 61 --restart on-failure --snapshot-every 200"),
     ));
     let snapshot = dir.path().join("qtables").join("uav1_trial0.bin");
     wait_until("UAV1's snapshot after 3000 episodes", Duration::from_secs(60), || {
@@ -200,18 +179,7 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
         let run = Supervised::start(&run_args(
             &id,
             &out,
-            &[
-                "--scenario",
-                "s3",
-                "--uavs",
-                "2",
-                "--episodes",
-                "50000",
-                "--trials",
-                "2",
-                "--seed",
-                "71",
-            ],
+            &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 71"),
         ));
         std::thread::sleep(Duration::from_millis(100 + random.below(1500)));
         signal(run.pid(), libc::SIGINT);
@@ -243,18 +211,7 @@ fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     let run = Supervised::start(&run_args(
         &id,
         &out,
-        &[
-            "--scenario",
-            "s3",
-            "--uavs",
-            "2",
-            "--episodes",
-            "50000",
-            "--trials",
-            "2",
-            "--seed",
-            "81",
-        ],
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 81"),
     ));
     let world = format!("world --run-id {id}");
     wait_until("episodes to be recorded", Duration::from_secs(30), || {
@@ -332,7 +289,7 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         "rogue joins not logged:\n{log}"
     );
     // Nothing the rogue sent changed the run: it equals the in-process twin byte for byte.
-    supervise(inproc.path(), &[&args[..], &["--transport", "inproc"]].concat());
+    supervise(inproc.path(), &[&args[..], &words("--transport inproc")].concat());
     assert_eq!(read(&shm.path().join("episodes.csv")), read(&inproc.path().join("episodes.csv")));
     assert_nothing_left(&id);
 }
@@ -344,20 +301,7 @@ fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
     let run = Supervised::start(&run_args(
         &id,
         &out,
-        &[
-            "--scenario",
-            "s3",
-            "--uavs",
-            "2",
-            "--episodes",
-            "2000",
-            "--trials",
-            "1",
-            "--seed",
-            "95",
-            "--fault",
-            "2=hang-at-round=3000,ignore-sigterm",
-        ],
+        &words("--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 95 --fault 2=hang-at-round=3000,ignore-sigterm"),
     ));
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
