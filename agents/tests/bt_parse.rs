@@ -4,31 +4,10 @@
 
 use flockstep_agents::bt::parse::{parse_tree, ParseError, MAX_DEPTH, MAX_NODES};
 use flockstep_agents::bt::render::{render_ascii, to_text};
-use flockstep_agents::bt::spec::{LeafCatalog, LeafId, LeafKind, NodeKind, NodeSpec, TreeSpec};
+use flockstep_agents::bt::spec::{LeafCatalog, LeafKind, NodeKind, NodeSpec, TreeSpec};
 
-/// The UAV's leaves (thesis 3.3), numbered in this order.
-const ACTIONS: [&str; 5] = ["rotate", "elevate", "deElevate", "waypointTranslation", "endEpisode"];
-const CONDITIONS: [&str; 1] = ["seeTarget"];
-
-struct Uav;
-
-impl LeafCatalog for Uav {
-    fn resolve(&self, kind: LeafKind, name: &str) -> Option<LeafId> {
-        let position = uav_names(kind).iter().position(|known| *known == name)?;
-        LeafId::try_from(position).ok()
-    }
-
-    fn names(&self, kind: LeafKind) -> Vec<String> {
-        uav_names(kind).iter().map(|name| name.to_string()).collect()
-    }
-}
-
-fn uav_names(kind: LeafKind) -> &'static [&'static str] {
-    match kind {
-        LeafKind::Action => &ACTIONS,
-        LeafKind::Condition => &CONDITIONS,
-    }
-}
+/// The product's catalog of UAV leaves (thesis 3.3).
+use flockstep_agents::uav::UavCatalog as Uav;
 
 const FIG5: &str = "\
 OR 2

@@ -7,33 +7,12 @@
 
 use flockstep_agents::bt::parse::{parse_tree, ParseError};
 use flockstep_agents::bt::render::{render_ascii, to_text};
-use flockstep_agents::bt::spec::{LeafCatalog, LeafId, LeafKind, NodeKind, NodeSpec, TreeSpec};
+use flockstep_agents::bt::spec::{LeafCatalog, LeafKind, NodeKind, NodeSpec, TreeSpec};
 use proptest::prelude::*;
 use proptest::sample::{select, Index};
 
-const ACTIONS: [&str; 5] = ["rotate", "elevate", "deElevate", "waypointTranslation", "endEpisode"];
-const CONDITIONS: [&str; 1] = ["seeTarget"];
-
-/// The UAV's leaves (thesis 3.3), numbered in this order.
-struct Uav;
-
-impl LeafCatalog for Uav {
-    fn resolve(&self, kind: LeafKind, name: &str) -> Option<LeafId> {
-        let position = uav_names(kind).iter().position(|known| *known == name)?;
-        LeafId::try_from(position).ok()
-    }
-
-    fn names(&self, kind: LeafKind) -> Vec<String> {
-        uav_names(kind).iter().map(|name| name.to_string()).collect()
-    }
-}
-
-fn uav_names(kind: LeafKind) -> &'static [&'static str] {
-    match kind {
-        LeafKind::Action => &ACTIONS,
-        LeafKind::Condition => &CONDITIONS,
-    }
-}
+/// The product's catalog of UAV leaves (thesis 3.3).
+use flockstep_agents::uav::UavCatalog as Uav;
 
 /// Kind tokens, valid and not, for the token soups.
 const KINDS: [&str; 17] = [
@@ -107,11 +86,14 @@ fn count_nodes(node: &NodeSpec) -> usize {
 }
 
 fn leaf() -> impl Strategy<Value = NodeSpec> {
-    let action = select(&ACTIONS[..]).prop_map(|name| NodeKind::Action {
-        leaf: Uav.resolve(LeafKind::Action, name).unwrap_or_default(),
-        name: name.to_owned(),
+    let action = select(Uav.names(LeafKind::Action)).prop_map(|name| NodeKind::Action {
+        leaf: Uav.resolve(LeafKind::Action, &name).unwrap_or_default(),
+        name,
     });
-    let condition = Just(NodeKind::Condition { leaf: 0, name: CONDITIONS[0].to_owned() });
+    let condition = select(Uav.names(LeafKind::Condition)).prop_map(|name| NodeKind::Condition {
+        leaf: Uav.resolve(LeafKind::Condition, &name).unwrap_or_default(),
+        name,
+    });
     prop_oneof![3 => action, 1 => condition].prop_map(|kind| node(kind, vec![]))
 }
 
