@@ -9,14 +9,12 @@
 //! world knows they are on disk. `docs/MEMBERSHIP.md` describes the protocol.
 
 use crate::agent::{AgentSpec, UavAgent};
-use crate::bt::parse::parse_tree;
 use crate::bt::render::to_text;
-use crate::bt::spec::TreeSpec;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
 use crate::snapshot::{restore_snapshots, write_snapshot, write_snapshots};
 use crate::trace::Trace;
-use crate::uav::UavCatalog;
+use crate::uav::load_uav_tree;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
@@ -339,7 +337,7 @@ impl Session {
         let comm = CommMode::parse(&setup.comm).with_context(|| {
             format!("communication mode `{}`: expected none, flags or compact", setup.comm)
         })?;
-        let tree = load_tree(learner.bt.as_deref())?;
+        let tree = load_uav_tree(learner.bt.as_deref())?;
         let tree_text = to_text(&tree);
         let base = setup.params.unwrap_or_default();
         let params = LearnParams {
@@ -395,15 +393,4 @@ impl Session {
         }
         Ok(())
     }
-}
-
-fn load_tree(path: Option<&Path>) -> Result<TreeSpec> {
-    Ok(match path {
-        None => parse_tree("fig5.bt", crate::FIG5_TREE, &UavCatalog)?,
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read tree file {}", path.display()))?;
-            parse_tree(&path.display().to_string(), &text, &UavCatalog)?
-        }
-    })
 }

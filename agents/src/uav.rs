@@ -40,6 +40,20 @@ impl LeafCatalog for UavCatalog {
     }
 }
 
+/// Reads and parses a UAV tree file, or the built-in Fig. 5 tree when `path` is None.
+pub fn load_uav_tree(path: Option<&std::path::Path>) -> anyhow::Result<crate::bt::spec::TreeSpec> {
+    use anyhow::Context;
+    let (source, text) = match path {
+        None => ("fig5.bt".to_string(), crate::FIG5_TREE.to_string()),
+        Some(path) => (
+            path.display().to_string(),
+            std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read tree file {}", path.display()))?,
+        ),
+    };
+    Ok(crate::bt::parse::parse_tree(&source, &text, &UavCatalog)?)
+}
+
 /// The UAV's body during one tick: its pose, what its camera sees, and the commands and
 /// episode end the tree has issued so far.
 pub struct Body<'a> {

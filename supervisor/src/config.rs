@@ -3,12 +3,12 @@
 use crate::cli::{Restart, RunArgs, Transport};
 use anyhow::{bail, Context, Result};
 use flockstep_agents::agent::AgentSpec;
-use flockstep_agents::bt::parse::parse_tree;
+
 use flockstep_agents::bt::render::to_text;
 use flockstep_agents::bt::spec::TreeSpec;
 use flockstep_agents::comm::CommMode;
 use flockstep_agents::learning::LearnParams;
-use flockstep_agents::uav::UavCatalog;
+use flockstep_agents::uav::load_uav_tree;
 use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
 use flockstep_world::scenario::Scenario;
 use flockstep_world::sim::EpisodeConfig;
@@ -78,7 +78,7 @@ impl RunConfig {
                 .with_context(|| format!("--comm `{c}`: expected none, flags or compact"))?,
             None => default_comm(args.uavs),
         };
-        let tree = load_tree(args.bt.as_ref())?;
+        let tree = load_uav_tree(args.bt.as_deref())?;
         let params = LearnParams {
             alpha: args.alpha,
             gamma: args.gamma,
@@ -165,19 +165,6 @@ pub fn default_comm(uavs: usize) -> CommMode {
         1 => CommMode::None,
         2 => CommMode::Flags,
         _ => CommMode::Compact,
-    }
-}
-
-/// Reads and parses a tree file, or the built-in Fig. 5 tree.
-pub fn load_tree(path: Option<&PathBuf>) -> Result<TreeSpec> {
-    match path {
-        None => Ok(parse_tree("fig5.bt", flockstep_agents::FIG5_TREE, &UavCatalog)
-            .expect("the built-in tree parses")),
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read tree file {}", path.display()))?;
-            Ok(parse_tree(&path.display().to_string(), &text, &UavCatalog)?)
-        }
     }
 }
 
