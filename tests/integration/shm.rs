@@ -51,31 +51,38 @@ fn assert_same_results(shm: &Path, inproc: &Path) {
     }
 }
 
+/// Both transports give the same bytes for `scenario` with `uavs` UAVs (2 trials, 2000
+/// episodes).
+fn assert_transports_agree(scenario: &str, uavs: &str, seed: &str) {
+    let args = [
+        "--scenario",
+        scenario,
+        "--uavs",
+        uavs,
+        "--episodes",
+        "2000",
+        "--trials",
+        "2",
+        "--seed",
+        seed,
+    ];
+    let (shm, inproc) = both(&args, &format!("eq-{scenario}"));
+    assert_same_results(shm.path(), inproc.path());
+}
+
 #[test]
 fn s1_shm_and_inproc_are_byte_identical() {
-    let (shm, inproc) = both(
-        &["--scenario", "s1", "--uavs", "1", "--episodes", "2000", "--trials", "2", "--seed", "11"],
-        "eq-s1",
-    );
-    assert_same_results(shm.path(), inproc.path());
+    assert_transports_agree("s1", "1", "11");
 }
 
 #[test]
 fn s2_shm_and_inproc_are_byte_identical() {
-    let (shm, inproc) = both(
-        &["--scenario", "s2", "--uavs", "1", "--episodes", "2000", "--trials", "2", "--seed", "12"],
-        "eq-s2",
-    );
-    assert_same_results(shm.path(), inproc.path());
+    assert_transports_agree("s2", "1", "12");
 }
 
 #[test]
 fn s3_shm_and_inproc_are_byte_identical() {
-    let (shm, inproc) = both(
-        &["--scenario", "s3", "--uavs", "2", "--episodes", "2000", "--trials", "2", "--seed", "13"],
-        "eq-s3",
-    );
-    assert_same_results(shm.path(), inproc.path());
+    assert_transports_agree("s3", "2", "13");
 }
 
 /// One line of an agent's trace: (round, kind, trial) -> (episode, episode_tick, sent wp,
