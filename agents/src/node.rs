@@ -251,35 +251,31 @@ fn join_nonce() -> u64 {
     (u64::from(std::process::id()) << 32 ^ nanos) | 1
 }
 
-/// How long an agent refused its own slot waits before it asks again.
+/// How often an agent not yet admitted repeats its join request.
 const REJOIN_PAUSE: Duration = Duration::from_millis(50);
 
 /// Asks the world for a slot and waits for its answer; returns the slot and the observation
-/// that admitted the agent, which is the first round it must answer. An agent asking for
-/// any free route is refused if there is none; one asking for its own slot (a restart) asks
-/// again until the world has dropped its dead predecessor, within `timeout`.
+/// that admitted the agent, which is the first round it must answer. The request is
+/// repeated until it is answered: one sent while the world is still setting up its ports is
+/// lost, and an agent asking for its own slot (a restart) must ask again once the world has
+/// dropped its dead predecessor. An agent asking for any free route is refused if there is
+/// none.
 fn await_admission(
     ports: &AgentPorts,
     request: &JoinRequest,
     timeout: Duration,
 ) -> Result<(usize, ObservationSample)> {
-    ports.send_join(request)?;
-    let mut asked = Instant::now();
-    let mut refused = false;
+    let mut asked: Option<Instant> = None;
     ports
         .waiter()
         .wait(&"admission by the world", timeout, || {
-            // Not every round: the world logs each refusal.
-            if refused && asked.elapsed() >= REJOIN_PAUSE {
+            if asked.is_none_or(|at| at.elapsed() >= REJOIN_PAUSE) {
                 ports.send_join(request)?;
-                (asked, refused) = (Instant::now(), false);
+                asked = Some(Instant::now());
             }
             while let Some(sample) = ports.try_observation()? {
-                if sample.refused_nonce == request.nonce {
-                    if request.slot == ANY_SLOT {
-                        return Err(TransportError::Refused { run: ports.run_id().to_string() });
-                    }
-                    refused = true;
+                if sample.refused_nonce == request.nonce && request.slot == ANY_SLOT {
+                    return Err(TransportError::Refused { run: ports.run_id().to_string() });
                 }
                 if let Some(slot) = sample.owners.iter().position(|&n| n == request.nonce) {
                     return Ok(Some((slot, sample)));

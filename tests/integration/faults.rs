@@ -4,7 +4,7 @@
 
 use crate::harness::{
     assert_nothing_left, episode_rows, pids_with, read, run_id, scratch, signal, summary,
-    supervise, wait_until, Supervised, AGENT,
+    supervise, wait_until, words, Supervised, AGENT,
 };
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
@@ -21,11 +21,6 @@ impl Lcg {
         self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (self.0 >> 33) % bound
     }
-}
-
-/// The words of `text`: long argument lists read better as one string.
-fn words(text: &str) -> Vec<&str> {
-    text.split_whitespace().collect()
 }
 
 fn run_args<'a>(id: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
@@ -248,8 +243,6 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         let ports = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
             .and_then(RunServices::into_agent)
             .expect("the rogue opens the run");
-        ports.send_join(&JoinRequest { nonce: 0, pid: 1, slot: 7 }).expect("send a join");
-        ports.send_join(&JoinRequest { nonce: 99, pid: 1, slot: ANY_SLOT }).expect("send a join");
         let mut sent = 0;
         let start = Instant::now();
         while sent < 200 && start.elapsed() < Duration::from_secs(60) {
@@ -257,6 +250,12 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
                 std::thread::sleep(Duration::from_millis(1));
                 continue;
             };
+            if sent == 0 {
+                // Joins while the run is under way (the world's ports surely exist by now).
+                ports.send_join(&JoinRequest { nonce: 0, pid: 1, slot: 7 }).expect("send a join");
+                let any = JoinRequest { nonce: 99, pid: 1, slot: ANY_SLOT };
+                ports.send_join(&any).expect("send a join");
+            }
             let mut bad = Action::new(0);
             bad.round = observation.round;
             bad.n_trials = observation.n_trials;

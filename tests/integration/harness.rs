@@ -9,6 +9,11 @@ use std::sync::atomic::{AtomicU32, Ordering};
 pub const SUPERVISOR: &str = env!("CARGO_BIN_EXE_supervisor");
 pub const AGENT: &str = env!("CARGO_BIN_EXE_agent");
 
+/// The words of `text`: long argument lists read better as one string.
+pub fn words(text: &str) -> Vec<&str> {
+    text.split_whitespace().collect()
+}
+
 /// A run id unique to this test process and call (tests run in parallel).
 pub fn run_id(tag: &str) -> String {
     static NEXT: AtomicU32 = AtomicU32::new(0);

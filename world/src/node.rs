@@ -134,6 +134,14 @@ struct Members {
     refused: u64,
 }
 
+impl Members {
+    /// Agents repeat their join request until they see it answered: a repeat of a request
+    /// already admitted is not a new one.
+    fn is_repeat(&self, request: &JoinRequest) -> bool {
+        request.nonce != 0 && self.owners.contains(&request.nonce)
+    }
+}
+
 impl Default for Members {
     fn default() -> Self {
         Members { owners: [0; MAX_AGENTS], pids: [0; MAX_AGENTS], waiting: Vec::new(), refused: 0 }
@@ -157,6 +165,9 @@ impl WorldNode {
             || {
                 while let Some(request) = ports.try_join()? {
                     let slot = request.slot as usize;
+                    if members.is_repeat(&request) {
+                        continue;
+                    }
                     if request.nonce != 0 && slot < uavs && members.owners[slot] == 0 {
                         members.owners[slot] = request.nonce;
                         members.pids[slot] = request.pid;
@@ -178,11 +189,11 @@ impl WorldNode {
             requests.push(request);
         }
         for request in requests {
-            if request.nonce == 0 || self.members.owners.contains(&request.nonce) {
-                tracing::warn!(
-                    nonce = request.nonce,
-                    "ignored a join request with a used or zero nonce"
-                );
+            if self.members.is_repeat(&request) {
+                continue;
+            }
+            if request.nonce == 0 {
+                tracing::warn!(pid = request.pid, "ignored a join request with a zero nonce");
                 continue;
             }
             let wanted = (request.slot != ANY_SLOT).then_some(request.slot as usize);
