@@ -2,7 +2,7 @@
 //! Equivalence with the in-process runner, lockstep seen from the agents' own traces,
 //! isolation of two simultaneous runs, and nothing left in shared memory afterwards.
 
-use crate::harness::{read, run_id, scratch, supervise, SUPERVISOR};
+use crate::harness::{read, run_id, scratch, supervise, words, SUPERVISOR};
 use flockstep_proto::transport::leftover_files;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -176,28 +176,16 @@ fn two_simultaneous_runs_stay_independent() {
     let dirs = [scratch(), scratch()];
     let ids = [run_id("iso-a"), run_id("iso-b")];
     let seeds = ["31", "32"];
+    let run = |i: usize| {
+        [&words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed")[..], &[seeds[i]]]
+            .concat()
+    };
     let children: Vec<_> = (0..2)
         .map(|i| {
             let mut cmd = Command::new(SUPERVISOR);
-            cmd.args([
-                "--scenario",
-                "s3",
-                "--uavs",
-                "2",
-                "--episodes",
-                "1000",
-                "--trials",
-                "2",
-                "--seed",
-                seeds[i],
-                "--transport",
-                "shm",
-                "--run-id",
-                &ids[i],
-                "--quiet",
-                "--out",
-            ])
-            .arg(dirs[i].path());
+            cmd.args(run(i))
+                .args(["--transport", "shm", "--run-id", &ids[i], "--quiet", "--out"])
+                .arg(dirs[i].path());
             let child = cmd.spawn().expect("start a supervisor");
             (cmd, child)
         })
@@ -208,23 +196,7 @@ fn two_simultaneous_runs_stay_independent() {
     }
     for i in 0..2 {
         let twin = scratch();
-        supervise(
-            twin.path(),
-            &[
-                "--scenario",
-                "s3",
-                "--uavs",
-                "2",
-                "--episodes",
-                "1000",
-                "--trials",
-                "2",
-                "--seed",
-                seeds[i],
-                "--transport",
-                "inproc",
-            ],
-        );
+        supervise(twin.path(), &[&run(i)[..], &["--transport", "inproc"]].concat());
         assert_same_results(dirs[i].path(), twin.path());
         assert!(leftover_files(&ids[i]).expect("list files").is_empty());
     }

@@ -1,7 +1,9 @@
 //! Q-table snapshots put to use (issue 5): `supervisor eval --qtables DIR` evaluates a
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
-use crate::harness::{episode_rows, number, run_ok, scratch, summary, supervise, SUPERVISOR};
+use crate::harness::{
+    episode_rows, number, run_ok, scratch, summary, supervise, words, SUPERVISOR,
+};
 
 #[test]
 fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
@@ -69,39 +71,10 @@ fn resume_continues_from_the_learned_level() {
     );
     let second = scratch();
     let resume = first.path().display().to_string();
-    supervise(
-        second.path(),
-        &[
-            "--transport",
-            "inproc",
-            "--scenario",
-            "s2",
-            "--uavs",
-            "1",
-            "--episodes",
-            "200",
-            "--seed",
-            "6",
-            "--resume",
-            &resume,
-        ],
-    );
+    let continued = words("--transport inproc --scenario s2 --uavs 1 --episodes 200 --seed 6");
+    supervise(second.path(), &[&continued[..], &["--resume", &resume]].concat());
     let fresh = scratch();
-    supervise(
-        fresh.path(),
-        &[
-            "--transport",
-            "inproc",
-            "--scenario",
-            "s2",
-            "--uavs",
-            "1",
-            "--episodes",
-            "200",
-            "--seed",
-            "6",
-        ],
-    );
+    supervise(fresh.path(), &continued);
     let mean = |dir: &std::path::Path| {
         let rows = episode_rows(dir);
         rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64
