@@ -114,12 +114,13 @@ impl TrialAgent {
         ));
         let route_lens: Vec<usize> =
             (0..spec.scenario.n_routes()).map(|r| spec.scenario.route_len(r)).collect();
+        let comm = CommState::new(spec.comm, spec.slot, &route_lens, spec.scenario.n_targets());
         Ok(TrialAgent {
             slot: spec.slot,
             route_len: spec.scenario.route_len(spec.slot),
             tree: Tree::new(&spec.tree, spec.params, rng)?,
-            states: StateSpace::default(),
-            comm: CommState::new(spec.comm, spec.slot, &route_lens, spec.scenario.n_targets()),
+            states: StateSpace::new(comm.words().len()),
+            comm,
             scenario: spec.scenario.clone(),
             train_params: spec.params,
             pose: spec.scenario.start_pose(),

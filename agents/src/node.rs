@@ -21,7 +21,7 @@ use flockstep_proto::transport::{
     exit_with_parent, termination_requested, AgentPorts, ObservationSample, RunConfig, RunServices,
     SignalMode, TransportError,
 };
-use flockstep_proto::{Action, JoinRequest, ObservationKind, RunInfo, ANY_SLOT};
+use flockstep_proto::{JoinRequest, ObservationKind, RunInfo, ANY_SLOT};
 use flockstep_world::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -196,7 +196,6 @@ fn serve(
     let mut session = Session::new(slot, &setup, learner, out)?;
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
-    let mut action = Box::new(Action::new(slot));
     let mut next_round = first.round;
     let mut admission = Some(first);
     loop {
@@ -226,6 +225,7 @@ fn serve(
                 _ => {}
             }
         }
+        let mut action = ports.loan_action()?;
         session
             .agent
             .act(&observation, &mut action)
@@ -235,11 +235,11 @@ fn serve(
         }
         if observation.kind == ObservationKind::Stop as u8 {
             session.save_all()?;
-            ports.publish_action(&action)?;
+            action.send()?;
             return Ok(());
         }
         session.save_periodic()?;
-        ports.publish_action(&action)?;
+        action.send()?;
     }
 }
 

@@ -84,7 +84,7 @@ impl Snapshot {
             comm,
             tree: tree.to_string(),
             episodes: agent.trained_episodes(),
-            states: agent.states().keys().iter().map(|k| k.to_vec()).collect(),
+            states: agent.states().keys().map(<[u64]>::to_vec).collect(),
             tables: agent.tree().tables().into_iter().cloned().collect(),
         }
     }
@@ -121,10 +121,8 @@ impl Snapshot {
                 )));
             }
         }
-        let states = StateSpace::from_keys(
-            self.states.iter().map(|k| k.clone().into_boxed_slice()).collect(),
-        )
-        .map_err(SnapshotError::Inconsistent)?;
+        let states = StateSpace::from_keys(agent.comm().words().len(), &self.states)
+            .map_err(SnapshotError::Inconsistent)?;
         agent.tree_mut().set_tables(self.tables.clone()).map_err(SnapshotError::Inconsistent)?;
         agent.set_states(states);
         Ok(())

@@ -10,7 +10,7 @@
 use flockstep_proto::transport::{
     cleanup_run, exit_with_parent, leftover_files, RunConfig, RunServices, SignalMode, WaitPolicy,
 };
-use flockstep_proto::{Action, Observation, ObservationKind, MAX_AGENTS};
+use flockstep_proto::{Observation, ObservationKind, MAX_AGENTS};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -135,10 +135,11 @@ fn child_world(args: &[String]) -> Result<(), Error> {
 fn child_agent(args: &[String]) -> Result<(), Error> {
     let args = ChildArgs::parse(args)?;
     let agent = RunServices::open(&args.run_config()?)?.into_agent()?;
-    let mut action = Box::new(Action::new(args.value as usize));
+    let slot = args.value as u32;
+    let mut last_round = 0;
     loop {
         let (round, stop) = agent.waiter().wait(
-            &format_args!("the observation after round {}", action.round),
+            &format_args!("the observation after round {last_round}"),
             START_TIMEOUT,
             || {
                 Ok(agent
@@ -149,8 +150,13 @@ fn child_agent(args: &[String]) -> Result<(), Error> {
         if stop {
             return Ok(());
         }
+        // What the product's agent writes besides its trials: the header.
+        let mut action = agent.loan_action()?;
         action.round = round;
-        agent.publish_action(&action)?;
+        action.agent = slot;
+        action.n_trials = 0;
+        action.send()?;
+        last_round = round;
     }
 }
 

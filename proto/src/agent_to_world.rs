@@ -58,7 +58,7 @@ impl TrialAction {
             expected: format!("<= {MAX_COMMANDS}"),
         });
         over.into_iter().map(Err).chain(self.commands[..n].iter().map(|&c| {
-            Command::from_u8(c).ok_or(crate::FieldError {
+            Command::from_u8(c).ok_or_else(|| crate::FieldError {
                 field: "action.command",
                 value: c.into(),
                 expected: "0..=3".into(),

@@ -18,7 +18,9 @@ mod run_services;
 mod wait;
 
 pub use cleanup::{cleanup_run, leftover_files, sweep_stale_runs, RunCleanup, SweepReport};
-pub use ports::{AgentPorts, ObservationSample, Peers, SupervisorPorts, WorldPorts};
+pub use ports::{
+    ActionLoan, ActionSample, AgentPorts, ObservationSample, Peers, SupervisorPorts, WorldPorts,
+};
 pub use run_services::{RunServices, EPISODE_BUFFER, MAX_NODES, SPARE};
 pub use wait::{WaitPolicy, Waiter};
 

@@ -128,7 +128,7 @@ fn run_info(args: &WorldArgs) -> Result<RunInfo> {
 struct Members {
     owners: [u64; MAX_AGENTS],
     pids: [u32; MAX_AGENTS],
-    /// Join requests read before the agent count was complete, answered in the first round.
+    /// Join requests read and not yet answered: the next round answers them.
     waiting: Vec<JoinRequest>,
     /// A join request refused in the round being prepared (0: none).
     refused: u64,
@@ -181,14 +181,11 @@ impl WorldNode {
         Ok(())
     }
 
-    /// Answers join requests: a free route (the one asked for if free) from the next round
-    /// on, or a refusal. The trials let the agent in at their next episode start.
+    /// Answers the join requests read so far: a free route (the one asked for if free) from
+    /// the next round on, or a refusal. The trials let the agent in at their next episode
+    /// start.
     fn admit_joiners(&mut self) -> Result<()> {
-        let mut requests = std::mem::take(&mut self.members.waiting);
-        while let Some(request) = self.ports.try_join()? {
-            requests.push(request);
-        }
-        for request in requests {
+        for request in std::mem::take(&mut self.members.waiting) {
             if self.members.is_repeat(&request) {
                 continue;
             }
@@ -241,6 +238,10 @@ impl WorldNode {
 
     /// Runs rounds until every trial is done or the supervisor asks to stop, then tells the
     /// agents to stop and waits for each one's last answer (its snapshots are written then).
+    ///
+    /// Between publishing a round and the first answer the world has nothing to do, so what
+    /// does not shape the round waits for then: the episode records of the round before, and
+    /// reading join requests and control commands (acted on in the next round).
     fn barrier(&mut self) -> Result<()> {
         let mut reports = Vec::new();
         let mut stop_requested = false;
@@ -261,6 +262,15 @@ impl WorldNode {
                     kind: observation.kind,
                 };
             })?;
+            for report in reports.drain(..) {
+                self.ports.publish_episode(&report)?;
+            }
+            while let Some(request) = self.ports.try_join()? {
+                self.members.waiting.push(request);
+            }
+            while let Some(control) = self.ports.try_control()? {
+                stop_requested |= control.stop == 1;
+            }
             let stopping = round.kind == ObservationKind::Stop as u8;
             // The agents' last answer comes after their snapshots: allow for writing them.
             let timeout = if stopping {
@@ -268,7 +278,7 @@ impl WorldNode {
             } else {
                 self.agent_timeout
             };
-            let answered = self.collect_actions(round, timeout, &mut stop_requested, !stopping)?;
+            let answered = self.collect_actions(round, timeout, !stopping)?;
             if stopping {
                 return Ok(());
             }
@@ -284,9 +294,6 @@ impl WorldNode {
                 bail!("every agent is gone: the run cannot go on");
             }
             self.world.end_round(&mut reports);
-            for report in reports.drain(..) {
-                self.ports.publish_episode(&report)?;
-            }
         }
     }
 
@@ -298,7 +305,6 @@ impl WorldNode {
         &mut self,
         this_round: Round,
         timeout: Duration,
-        stop_requested: &mut bool,
         apply: bool,
     ) -> Result<Answers> {
         let Self { world, ports, members, .. } = self;
@@ -333,9 +339,6 @@ impl WorldNode {
                         }
                     }
                     answers.answered |= 1 << slot;
-                }
-                while let Some(control) = ports.try_control()? {
-                    *stop_requested |= control.stop == 1;
                 }
                 let missing = live & !answers.answered;
                 if missing == 0 {

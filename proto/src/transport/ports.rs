@@ -16,6 +16,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::event;
 use std::time::{Duration, Instant};
 
@@ -25,6 +26,9 @@ pub const EPISODE_WAKE_EVERY: u64 = (super::EPISODE_BUFFER / 4) as u64;
 
 /// An observation as the agent reads it: straight from shared memory, no copy.
 pub type ObservationSample = Sample<Ipc, Observation, ()>;
+
+/// An action as the world reads it: straight from shared memory, no copy.
+pub type ActionSample = Sample<Ipc, Action, ()>;
 
 impl RunServices {
     /// The world's ports.
@@ -227,10 +231,10 @@ impl WorldPorts {
         Ok(())
     }
 
-    /// The next action in arrival order, if any.
-    pub fn try_action(&self) -> Result<Option<Action>, TransportError> {
-        let sample = self.actions.receive().map_err(|e| self.err(ACTIONS, "receiving", e))?;
-        Ok(sample.map(|s| *s))
+    /// The next action in arrival order, if any, read in place: only what the world looks
+    /// at (the header and the trials in use) crosses from the agent's core.
+    pub fn try_action(&self) -> Result<Option<ActionSample>, TransportError> {
+        self.actions.receive().map_err(|e| self.err(ACTIONS, "receiving", e))
     }
 
     /// Hands one record to the supervisor. Waits (bounded by `report_timeout`) while the
@@ -403,17 +407,62 @@ impl AgentPorts {
         Ok(sample.map(|s| *s))
     }
 
-    /// Answers a round and wakes the world.
-    pub fn publish_action(&self, action: &Action) -> Result<(), TransportError> {
+    /// A shared-memory sample to write this round's answer into; [`ActionLoan::send`] sends
+    /// it. As with observations, only what is written is touched: the header and the trials
+    /// in use, not the whole fixed-size message.
+    pub fn loan_action(&self) -> Result<ActionLoan<'_>, TransportError> {
         let run = &self.services.run.run_id;
-        self.actions.send_copy(*action).map_err(|e| port_error(run, ACTIONS, "sending", e))?;
-        self.wake_world.notify().map_err(|e| port_error(run, WAKE_WORLD, "notifying", e))?;
-        Ok(())
+        let loan = self
+            .actions
+            .loan_uninit()
+            .map_err(|e| port_error(run, ACTIONS, "loaning a sample", e))?;
+        // SAFETY: as in `WorldPorts::publish_observation`: `Action` is made of integers only,
+        // and a sample's memory is zero-filled shared memory or an earlier round's answer.
+        // The world reads only the header and the `n_trials` trials the agent writes.
+        let sample = unsafe { loan.assume_init() };
+        Ok(ActionLoan { sample, ports: self })
+    }
+
+    /// Answers a round with a copy of `action` and wakes the world.
+    pub fn publish_action(&self, action: &Action) -> Result<(), TransportError> {
+        let mut loan = self.loan_action()?;
+        *loan = *action;
+        loan.send()
     }
 
     /// Woken by observations.
     pub fn waiter(&self) -> &Waiter {
         &self.waiter
+    }
+}
+
+/// An agent's answer being written in shared memory (see [`AgentPorts::loan_action`]).
+/// Dropped without [`send`](Self::send), nothing is sent.
+pub struct ActionLoan<'a> {
+    sample: SampleMut<Ipc, Action, ()>,
+    ports: &'a AgentPorts,
+}
+
+impl ActionLoan<'_> {
+    /// Sends the answer and wakes the world.
+    pub fn send(self) -> Result<(), TransportError> {
+        let run = &self.ports.services.run.run_id;
+        self.sample.send().map_err(|e| port_error(run, ACTIONS, "sending", e))?;
+        self.ports.wake_world.notify().map_err(|e| port_error(run, WAKE_WORLD, "notifying", e))?;
+        Ok(())
+    }
+}
+
+impl std::ops::Deref for ActionLoan<'_> {
+    type Target = Action;
+    fn deref(&self) -> &Action {
+        &self.sample
+    }
+}
+
+impl std::ops::DerefMut for ActionLoan<'_> {
+    fn deref_mut(&mut self) -> &mut Action {
+        &mut self.sample
     }
 }
 
