@@ -94,20 +94,24 @@ impl Waiter {
                     waited,
                 });
             }
-            let slice = self.policy.slice.min(timeout - waited);
-            match self.listener.timed_wait(|_| {}, slice) {
-                // A signal cut the block short: re-check the latch, then poll again.
-                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
-                Err(e) => {
-                    return Err(TransportError::Port {
-                        run: self.run_id.clone(),
-                        service: self.service.clone(),
-                        op: "waiting on the listener",
-                        source: Box::new(e),
-                    })
-                }
-            }
+            self.sleep(self.policy.slice.min(timeout - waited))?;
             self.check_termination(what)?;
+        }
+    }
+
+    /// Blocks until a wake-up arrives or `timeout` passes, polling nothing: for a reader that
+    /// drains on its own schedule (the supervisor) instead of answering at once. A wake-up
+    /// sent while it was not blocked ends the next call at once.
+    pub fn sleep(&self, timeout: Duration) -> Result<(), TransportError> {
+        match self.listener.timed_wait(|_| {}, timeout) {
+            // A signal cut the block short: the caller re-checks what it waits for.
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(e) => Err(TransportError::Port {
+                run: self.run_id.clone(),
+                service: self.service.clone(),
+                op: "waiting on the listener",
+                source: Box::new(e),
+            }),
         }
     }
 
