@@ -14,7 +14,8 @@ use crate::learning::{LearnParams, StateId};
 use crate::state::StateSpace;
 use crate::uav::Body;
 use flockstep_proto::{
-    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_TRIALS,
+    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_AGENTS,
+    MAX_TRIALS,
 };
 use flockstep_world::scenario::Scenario;
 use rand::SeedableRng;
@@ -134,23 +135,24 @@ impl TrialAgent {
     /// One tick of this trial: reads `obs`, writes this agent's part of the action.
     pub fn act(
         &mut self,
-        obs: &TrialObservation,
+        obs: TrialObservation<'_>,
         live: u64,
         out: &mut TrialAction,
     ) -> Result<(), FieldError> {
         out.clear();
         let view = &obs.agents[self.slot];
         view.pose.validate(self.route_len)?;
-        flockstep_proto::check_below("observation.phase", obs.phase.into(), 2)?;
+        let header = obs.header;
+        flockstep_proto::check_below("observation.phase", header.phase.into(), 2)?;
         self.forget_departed(obs, live);
-        if obs.done != 0 || view.member == 0 {
+        if header.done != 0 || view.member == 0 {
             self.close_episode(obs, live)?;
             return Ok(());
         }
-        if self.open != Some((obs.phase, obs.episode)) {
+        if self.open != Some((header.phase, header.episode)) {
             self.close_episode(obs, live)?;
-            self.start_episode(obs.phase);
-            self.open = Some((obs.phase, obs.episode));
+            self.start_episode(header.phase);
+            self.open = Some((header.phase, header.episode));
         } else {
             self.hear(obs, live)?;
         }
@@ -183,8 +185,8 @@ impl TrialAgent {
     }
 
     /// What was heard from a peer that no longer takes part in this trial is void.
-    fn forget_departed(&mut self, obs: &TrialObservation, live: u64) {
-        let peers = obs.members & live & !(1 << self.slot);
+    fn forget_departed(&mut self, obs: TrialObservation<'_>, live: u64) {
+        let peers = obs.header.members & live & !(1 << self.slot);
         for peer in bits(self.peers & !peers) {
             self.comm.forget(peer);
         }
@@ -192,9 +194,11 @@ impl TrialAgent {
     }
 
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
-    fn hear(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
-        for peer in bits(obs.members & live & !(1 << self.slot)) {
-            self.comm.hear(peer, &obs.agents[peer].flags)?;
+    fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
+        for peer in bits(obs.header.members & live & !(1 << self.slot)) {
+            if let Some(view) = obs.agents.get(peer) {
+                self.comm.hear(peer, &view.flags)?;
+            }
         }
         Ok(())
     }
@@ -202,7 +206,7 @@ impl TrialAgent {
     /// Closes the open episode, if any. If this agent did not finish it, the episode was
     /// truncated: the pending learning steps bootstrap from the state it ended in, which
     /// includes the flags sent in its last tick (relayed with this observation).
-    fn close_episode(&mut self, obs: &TrialObservation, live: u64) -> Result<(), FieldError> {
+    fn close_episode(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
         let Some((phase, _)) = self.open.take() else {
             return Ok(());
         };
@@ -287,12 +291,14 @@ fn bits(mut mask: u64) -> impl Iterator<Item = usize> {
 #[derive(Debug, Clone)]
 pub struct UavAgent {
     slot: usize,
+    /// Agent slots of the run (one per route): what each observation must carry.
+    slots: usize,
     trials: Vec<TrialAgent>,
 }
 
 impl UavAgent {
     pub fn new(spec: &AgentSpec) -> Result<UavAgent, AgentError> {
-        if spec.slot >= spec.scenario.n_routes() {
+        if spec.slot >= spec.scenario.n_routes().min(MAX_AGENTS) {
             return Err(AgentError::NoRoute {
                 slot: spec.slot,
                 scenario: spec.scenario.name().to_string(),
@@ -305,7 +311,7 @@ impl UavAgent {
         spec.params.validate().map_err(AgentError::Params)?;
         let trials =
             (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
-        Ok(UavAgent { slot: spec.slot, trials })
+        Ok(UavAgent { slot: spec.slot, slots: spec.scenario.n_routes().min(MAX_AGENTS), trials })
     }
 
     pub fn slot(&self) -> usize {
@@ -326,11 +332,18 @@ impl UavAgent {
                 expected: format!("{}", self.trials.len()),
             });
         }
+        if obs.n_slots as usize != self.slots {
+            return Err(FieldError {
+                field: "observation.n_slots",
+                value: obs.n_slots.into(),
+                expected: format!("{} (the scenario's routes)", self.slots),
+            });
+        }
         out.round = obs.round;
         out.agent = self.slot as u32;
         out.n_trials = obs.n_trials;
         for (k, trial) in self.trials.iter_mut().enumerate() {
-            trial.act(&obs.trials[k], obs.live, &mut out.trials[k])?;
+            trial.act(obs.trial(k), obs.live, &mut out.trials[k])?;
         }
         Ok(())
     }

@@ -215,7 +215,7 @@ fn serve(
             )?,
         };
         next_round = observation.round + 1;
-        if observation.owners[slot] != nonce {
+        if observation.slot_owners().get(slot) != Some(&nonce) {
             bail!("the world dropped UAV{} from the run (presumed dead)", slot + 1);
         }
         for fault in &faults {
@@ -277,7 +277,7 @@ fn await_admission(
                 if sample.refused_nonce == request.nonce && request.slot == ANY_SLOT {
                     return Err(TransportError::Refused { run: ports.run_id().to_string() });
                 }
-                if let Some(slot) = sample.owners.iter().position(|&n| n == request.nonce) {
+                if let Some(slot) = sample.slot_owners().iter().position(|&n| n == request.nonce) {
                     return Ok(Some((slot, sample)));
                 }
             }

@@ -49,21 +49,28 @@ impl TrialAction {
         true
     }
 
-    /// The commands, decoded and range-checked.
-    pub fn decode_commands(&self) -> impl Iterator<Item = Result<Command, crate::FieldError>> + '_ {
-        let n = (self.n_commands as usize).min(MAX_COMMANDS);
-        let over = (self.n_commands as usize > MAX_COMMANDS).then(|| crate::FieldError {
-            field: "action.n_commands",
-            value: self.n_commands.into(),
-            expected: format!("<= {MAX_COMMANDS}"),
-        });
-        over.into_iter().map(Err).chain(self.commands[..n].iter().map(|&c| {
-            Command::from_u8(c).ok_or_else(|| crate::FieldError {
+    /// Checks the command count and every command code: the world calls it before it
+    /// applies anything of an action.
+    pub fn check_commands(&self) -> Result<(), crate::FieldError> {
+        crate::check_below("action.n_commands", self.n_commands.into(), MAX_COMMANDS as u64 + 1)?;
+        match self.commands[..self.n_commands as usize]
+            .iter()
+            .find(|&&c| Command::from_u8(c).is_none())
+        {
+            Some(&code) => Err(crate::FieldError {
                 field: "action.command",
-                value: c.into(),
+                value: code.into(),
                 expected: "0..=3".into(),
-            })
-        }))
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// The commands in the order issued (of a checked action: unknown codes are skipped).
+    #[inline]
+    pub fn commands(&self) -> impl Iterator<Item = Command> + '_ {
+        let n = (self.n_commands as usize).min(MAX_COMMANDS);
+        self.commands[..n].iter().filter_map(|&code| Command::from_u8(code))
     }
 }
 

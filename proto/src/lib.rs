@@ -27,7 +27,7 @@ pub use flags::Flags;
 pub use limits::{MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
 pub use pose::{Command, Heading, Height, Pose};
 pub use world_to_agent::{
-    AgentView, Observation, ObservationKind, Phase, RunInfo, TrialObservation,
+    AgentView, Observation, ObservationKind, Phase, RunInfo, TrialHeader, TrialObservation,
 };
 pub use world_to_supervisor::EpisodeReport;
 

@@ -27,11 +27,12 @@ pub struct AgentView {
     pub flags: Flags,
 }
 
-/// One trial's state at the start of a tick.
+/// One trial's state at the start of a tick; its agents' views follow all the headers in
+/// [`Observation::views`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("flockstep::TrialObservation")]
-pub struct TrialObservation {
+#[type_name("flockstep::TrialHeader")]
+pub struct TrialHeader {
     /// Episode index (0-based) this tick belongs to.
     pub episode: u64,
     /// Ticks of this trial executed before this one (the trial's clock).
@@ -45,12 +46,11 @@ pub struct TrialObservation {
     pub _reserved: [u8; 2],
     /// Bit i set: agent slot i takes part in this trial's episode (its view's `member`).
     pub members: u64,
-    pub agents: [AgentView; MAX_AGENTS],
 }
 
-impl Default for TrialObservation {
+impl Default for TrialHeader {
     fn default() -> Self {
-        TrialObservation {
+        TrialHeader {
             episode: 0,
             tick: 0,
             episode_tick: 0,
@@ -58,9 +58,16 @@ impl Default for TrialObservation {
             phase: Phase::Train as u8,
             _reserved: [0; 2],
             members: 0,
-            agents: [AgentView::default(); MAX_AGENTS],
         }
     }
+}
+
+/// One trial's part of an observation: its header and the views of the slots in use.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialObservation<'a> {
+    pub header: &'a TrialHeader,
+    /// Indexed by agent slot; `Observation::n_slots` entries.
+    pub agents: &'a [AgentView],
 }
 
 /// What a trial is doing: agents learn while training and act greedily (epsilon 0, no
@@ -93,6 +100,11 @@ pub enum ObservationKind {
 }
 
 /// The broadcast of one barrier round.
+///
+/// The message has room for every trial and agent slot, but a round fills only the ones in
+/// use, packed at the front: the trial headers side by side, then the views trial by trial.
+/// What a run of 2 UAVs and 4 trials reads and writes each round fits in about 20 cache
+/// lines of one page, where a layout with a full block per trial spread it over three pages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("flockstep::Observation")]
@@ -109,10 +121,15 @@ pub struct Observation {
     /// A join request refused in this round because no route was free (its `nonce`; 0:
     /// none).
     pub refused_nonce: u64,
+    /// Agent slots of the run (one per route): valid entries of `owners`, and views per trial.
+    pub n_slots: u32,
+    pub _reserved_slots: u32,
     /// Per slot: the `nonce` of the join request of the agent that holds it (0: free). An
     /// agent finds its slot here, and learns here if the world has dropped it.
     pub owners: [u64; MAX_AGENTS],
-    pub trials: [TrialObservation; MAX_TRIALS],
+    pub trials: [TrialHeader; MAX_TRIALS],
+    /// Trial k's view of slot i is `views[k * n_slots + i]` (see [`Observation::trial`]).
+    pub views: [AgentView; MAX_TRIALS * MAX_AGENTS],
 }
 
 impl Default for Observation {
@@ -124,8 +141,11 @@ impl Default for Observation {
             _reserved: [0; 3],
             n_trials: 0,
             refused_nonce: 0,
+            n_slots: 0,
+            _reserved_slots: 0,
             owners: [0; MAX_AGENTS],
-            trials: [TrialObservation::default(); MAX_TRIALS],
+            trials: [TrialHeader::default(); MAX_TRIALS],
+            views: [AgentView::default(); MAX_TRIALS * MAX_AGENTS],
         }
     }
 }
@@ -141,6 +161,43 @@ impl Observation {
 
     pub fn is_live(&self, agent: usize) -> bool {
         agent < MAX_AGENTS && self.live & (1u64 << agent) != 0
+    }
+
+    /// Slots in use, as far as the message can hold them (a reader checks `n_slots` against
+    /// what it expects; this never indexes past the arrays).
+    fn slots(&self) -> usize {
+        (self.n_slots as usize).min(MAX_AGENTS)
+    }
+
+    /// The owners of the slots in use.
+    pub fn slot_owners(&self) -> &[u64] {
+        &self.owners[..self.slots()]
+    }
+
+    /// Trial `trial`'s header and views.
+    ///
+    /// # Panics
+    /// If `trial >= MAX_TRIALS` (a reader's own trial count, never a received one).
+    pub fn trial(&self, trial: usize) -> TrialObservation<'_> {
+        let n = self.slots();
+        TrialObservation { header: &self.trials[trial], agents: &self.views[trial * n..][..n] }
+    }
+
+    /// Sets the round's shape and hands out each trial's header and views, to be written.
+    ///
+    /// # Panics
+    /// If `n_trials > MAX_TRIALS` or `n_slots > MAX_AGENTS` (the world's own counts).
+    pub fn shape_mut(
+        &mut self,
+        n_trials: usize,
+        n_slots: usize,
+    ) -> impl Iterator<Item = (&mut TrialHeader, &mut [AgentView])> {
+        assert!(n_trials <= MAX_TRIALS && n_slots <= MAX_AGENTS, "observation shape too big");
+        self.n_trials = n_trials as u32;
+        self.n_slots = n_slots as u32;
+        let views =
+            self.views.chunks_exact_mut(n_slots.max(1)).map(move |chunk| &mut chunk[..n_slots]);
+        self.trials[..n_trials].iter_mut().zip(views)
     }
 }
 

@@ -241,17 +241,21 @@ impl WorldNode {
     ///
     /// Between publishing a round and the first answer the world has nothing to do, so what
     /// does not shape the round waits for then: the episode records of the round before, and
-    /// reading join requests and control commands (acted on in the next round).
+    /// reading join requests and control commands (acted on in the next round). Those are
+    /// rare, and each look costs two reads of iceoryx2 queues, so the world looks once per
+    /// [`LOOK_FOR_REQUESTS_EVERY`], not every round.
     fn barrier(&mut self) -> Result<()> {
         let mut reports = Vec::new();
         let mut stop_requested = false;
+        let mut last_look = Instant::now();
         loop {
             self.admit_joiners()?;
             let Self { world, ports, members, .. } = &mut *self;
             let mut round = Round::default();
             ports.publish_observation(|observation| {
                 world.observe(observation);
-                observation.owners = members.owners;
+                let slots = observation.n_slots as usize;
+                observation.owners[..slots].copy_from_slice(&members.owners[..slots]);
                 observation.refused_nonce = std::mem::take(&mut members.refused);
                 if stop_requested {
                     observation.kind = ObservationKind::Stop as u8;
@@ -265,11 +269,14 @@ impl WorldNode {
             for report in reports.drain(..) {
                 self.ports.publish_episode(&report)?;
             }
-            while let Some(request) = self.ports.try_join()? {
-                self.members.waiting.push(request);
-            }
-            while let Some(control) = self.ports.try_control()? {
-                stop_requested |= control.stop == 1;
+            if last_look.elapsed() >= LOOK_FOR_REQUESTS_EVERY {
+                last_look = Instant::now();
+                while let Some(request) = self.ports.try_join()? {
+                    self.members.waiting.push(request);
+                }
+                while let Some(control) = self.ports.try_control()? {
+                    stop_requested |= control.stop == 1;
+                }
             }
             let stopping = round.kind == ObservationKind::Stop as u8;
             // The agents' last answer comes after their snapshots: allow for writing them.
@@ -376,6 +383,9 @@ struct Answers {
     answered: u64,
     gone: u64,
 }
+
+/// How often the world reads join requests and control commands.
+const LOOK_FOR_REQUESTS_EVERY: Duration = Duration::from_millis(1);
 
 /// How long a round may take before the world checks whether the missing agents live.
 const DEATH_CHECK_AFTER: Duration = Duration::from_millis(20);

@@ -14,8 +14,8 @@
 
 use crate::scenario::Scenario;
 use flockstep_proto::{
-    seed, Action, EpisodeReport, FieldError, Flags, Observation, ObservationKind, Phase, Pose,
-    TrialAction, TrialObservation, MAX_AGENTS, MAX_TRIALS,
+    seed, Action, AgentView, EpisodeReport, FieldError, Flags, Observation, ObservationKind, Phase,
+    Pose, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
 };
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -174,15 +174,14 @@ impl TrialWorld {
     }
 
     /// Writes this trial's part of the round's broadcast.
-    pub fn observe(&self, out: &mut TrialObservation) {
+    pub fn observe(&self, out: &mut TrialHeader, views: &mut [AgentView]) {
         out.episode = self.episode();
         out.tick = self.tick;
         out.episode_tick = self.episode_tick;
         out.done = self.done as u8;
         out.phase = self.phase as u8;
         out.members = self.members;
-        for slot in 0..self.poses.len() {
-            let view = &mut out.agents[slot];
+        for (slot, view) in views.iter_mut().enumerate() {
             if self.members & (1 << slot) == 0 {
                 *view = Default::default();
                 continue;
@@ -216,7 +215,7 @@ impl TrialWorld {
                 });
             }
         }
-        action.decode_commands().try_for_each(|command| command.map(drop))
+        action.check_commands()
     }
 
     /// Applies agent `slot`'s checked action for this tick: its commands in the order
@@ -230,7 +229,7 @@ impl TrialWorld {
             return; // hovering: only its flags count
         }
         let route_len = self.scenario.route_len(slot);
-        for command in action.decode_commands().flatten() {
+        for command in action.commands() {
             self.poses[slot] = self.poses[slot].apply(command, route_len);
         }
         if action.ended == 1 {
@@ -346,9 +345,10 @@ impl World {
         out.live = self.live;
         out.kind =
             if self.all_done() { ObservationKind::Stop } else { ObservationKind::Tick } as u8;
-        out.n_trials = self.trials.len() as u32;
-        for (trial, slot) in self.trials.iter().zip(out.trials.iter_mut()) {
-            trial.observe(slot);
+        for (trial, (header, views)) in
+            self.trials.iter().zip(out.shape_mut(self.trials.len(), self.slots()))
+        {
+            trial.observe(header, views);
         }
     }
 
@@ -410,12 +410,17 @@ impl World {
     /// asking for its own slot must fly that route: its snapshots are for it); with None,
     /// the first free route. None if there is no such route.
     pub fn free_slot(&self, wanted: Option<usize>) -> Option<usize> {
-        let routes = self.trials.first().map_or(0, |t| t.poses.len()).min(MAX_AGENTS);
+        let routes = self.slots();
         let free = |slot: &usize| *slot < routes && self.live & (1 << slot) == 0;
         match wanted {
             Some(slot) => Some(slot).filter(free),
             None => (0..routes).find(free),
         }
+    }
+
+    /// Agent slots of the run: one per route (at most `MAX_AGENTS`).
+    pub fn slots(&self) -> usize {
+        self.trials.first().map_or(0, |t| t.poses.len()).min(MAX_AGENTS)
     }
 
     /// Admits agent `slot` to the barrier from the next round on; each trial lets it take
