@@ -158,7 +158,7 @@ impl TrialAgent {
         }
         self.pose = view.pose;
         let sees_target = view.sees_target == 1;
-        self.comm.note_own(self.scenario.visible_targets(self.slot, view.pose), sees_target);
+        self.comm.note_own(|| self.scenario.visible_targets(self.slot, view.pose), sees_target);
         out.flags = self.comm.outgoing(view.pose.waypoint, sees_target);
         if self.finished {
             return Ok(());
@@ -354,5 +354,63 @@ impl UavAgent {
 
     pub fn trials_mut(&mut self) -> &mut [TrialAgent] {
         &mut self.trials
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::uav::load_uav_tree;
+    use flockstep_world::sim::{EpisodeConfig, World};
+
+    fn s3() -> Arc<Scenario> {
+        Arc::new(Scenario::resolve("s3").expect("s3 is built in"))
+    }
+
+    /// UAV1 of s3 and the world's first observation of a run with both UAVs and 2 trials.
+    fn uav1_and_first_observation() -> (UavAgent, Box<Observation>) {
+        let spec = AgentSpec {
+            slot: 0,
+            scenario: s3(),
+            tree: load_uav_tree(None).expect("the Fig. 5 tree loads"),
+            comm: CommMode::Flags,
+            params: LearnParams::default(),
+            seed: 1,
+            trials: 2,
+        };
+        let config = EpisodeConfig {
+            train_episodes: 10,
+            eval_episodes: 0,
+            eval_every: 0,
+            eval_block: 0,
+            tick_cap: 100,
+        };
+        let world = World::new(s3(), 2, 2, 1, config).expect("a world of s3");
+        let mut observation = Box::<Observation>::default();
+        world.observe(&mut observation);
+        (UavAgent::new(&spec).expect("UAV1 of s3"), observation)
+    }
+
+    #[test]
+    fn an_agent_answers_every_trial_of_a_round() {
+        let (mut agent, observation) = uav1_and_first_observation();
+        let mut action = Box::new(Action::new(0));
+        agent.act(&observation, &mut action).expect("a well-formed observation");
+        assert_eq!((action.round, action.agent, action.n_trials), (0, 0, 2));
+        for trial in &action.trials[..2] {
+            assert!(trial.n_commands > 0 || trial.ended == 1, "each trial's tree acts");
+            assert_eq!(trial.flags.valid, 1);
+        }
+    }
+
+    #[test]
+    fn an_observation_for_another_number_of_slots_is_refused() {
+        let (mut agent, mut observation) = uav1_and_first_observation();
+        observation.n_slots = 1;
+        let err = agent.act(&observation, &mut Box::new(Action::new(0))).unwrap_err();
+        assert_eq!((err.field, err.value), ("observation.n_slots", 1));
+        observation.n_slots = 1000;
+        let err = agent.act(&observation, &mut Box::new(Action::new(0))).unwrap_err();
+        assert_eq!((err.field, err.value), ("observation.n_slots", 1000));
     }
 }

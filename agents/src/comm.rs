@@ -170,11 +170,13 @@ impl CommState {
         }
     }
 
-    /// Notes this UAV's own camera result: `in_view` are the candidate cells its pose covers.
-    /// Only `compact` uses it (the flags carry the waypoint and the result as they are).
+    /// Notes this UAV's own camera result: `in_view` gives the candidate cells its pose
+    /// covers. Only `compact` uses it (the flags carry the waypoint and the result as they
+    /// are), so only `compact` looks them up.
     #[inline]
-    pub fn note_own(&mut self, in_view: u64, sees_target: bool) {
+    pub fn note_own(&mut self, in_view: impl FnOnce() -> u64, sees_target: bool) {
         if self.mode == CommMode::Compact {
+            let in_view = in_view();
             if sees_target {
                 self.own.1 |= in_view;
             } else {
@@ -320,11 +322,11 @@ mod tests {
         let mut me = CommState::new(CommMode::Compact, 0, &routes, 3);
         assert_eq!(me.words().len(), 1, "3 candidates: 6 bits, whatever the routes");
         let mut peer = CommState::new(CommMode::Compact, 1, &routes, 3);
-        peer.note_own(0b001, false); // candidate 0 in view, no target: ruled out
+        peer.note_own(|| 0b001, false); // candidate 0 in view, no target: ruled out
         assert!(me.hear(1, &peer.outgoing(0, false)).unwrap());
         assert_eq!((me.entry(0, 0), me.entry(0, 1)), (Some(false), None));
         let mut other = CommState::new(CommMode::Compact, 2, &routes, 3);
-        other.note_own(0b010, true); // candidate 1 in view with the target: confirmed
+        other.note_own(|| 0b010, true); // candidate 1 in view with the target: confirmed
         assert!(me.hear(2, &other.outgoing(0, true)).unwrap());
         assert_eq!(
             (me.entry(0, 0), me.entry(0, 1), me.entry(0, 2)),

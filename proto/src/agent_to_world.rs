@@ -115,3 +115,27 @@ pub struct JoinRequest {
 
 /// `JoinRequest::slot` of an agent that takes any free route.
 pub const ANY_SLOT: u32 = u32::MAX;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn commands_are_checked_in_count_and_code() {
+        let mut action = TrialAction::default();
+        assert!(action.push(Command::Rotate) && action.push(Command::NextWaypoint));
+        assert_eq!(action.check_commands(), Ok(()));
+        assert_eq!(action.commands().collect::<Vec<_>>(), [Command::Rotate, Command::NextWaypoint]);
+
+        let mut bad_code = action;
+        bad_code.commands[1] = 77;
+        let err = bad_code.check_commands().unwrap_err();
+        assert_eq!((err.field, err.value), ("action.command", 77));
+
+        let mut too_many = action;
+        too_many.n_commands = MAX_COMMANDS as u8 + 1;
+        let err = too_many.check_commands().unwrap_err();
+        assert_eq!((err.field, err.value), ("action.n_commands", MAX_COMMANDS as u64 + 1));
+        assert_eq!(too_many.commands().count(), MAX_COMMANDS, "never reads past the array");
+    }
+}

@@ -240,3 +240,34 @@ impl RunInfo {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trials_and_slots_in_use_are_packed_at_the_front() {
+        let mut observation = Box::<Observation>::default();
+        for (k, (header, views)) in observation.shape_mut(3, 2).enumerate() {
+            header.episode = k as u64;
+            for (slot, view) in views.iter_mut().enumerate() {
+                view.pose.waypoint = (10 * k + slot) as u16;
+            }
+        }
+        assert_eq!((observation.n_trials, observation.n_slots), (3, 2));
+        let waypoints: Vec<u16> = observation.views[..6].iter().map(|v| v.pose.waypoint).collect();
+        assert_eq!(waypoints, [0, 1, 10, 11, 20, 21], "trial by trial, n_slots each");
+        let trial = observation.trial(2);
+        assert_eq!(trial.header.episode, 2);
+        assert_eq!(trial.agents.iter().map(|v| v.pose.waypoint).collect::<Vec<_>>(), [20, 21]);
+        assert_eq!(observation.slot_owners().len(), 2);
+    }
+
+    #[test]
+    fn a_received_slot_count_past_the_limit_never_indexes_past_the_arrays() {
+        let mut observation = Box::<Observation>::default();
+        observation.n_slots = 1000;
+        assert_eq!(observation.slot_owners().len(), MAX_AGENTS);
+        assert_eq!(observation.trial(MAX_TRIALS - 1).agents.len(), MAX_AGENTS);
+    }
+}

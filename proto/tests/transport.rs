@@ -115,6 +115,47 @@ fn a_late_agent_gets_the_current_round_from_history() {
 }
 
 #[test]
+fn an_action_loan_dropped_unsent_sends_nothing() {
+    let config = run("loan");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    world.wait_for_peers(1, false, BOUND).unwrap();
+
+    let mut abandoned = agent.loan_action().unwrap();
+    abandoned.round = 5;
+    drop(abandoned);
+    let mut answer = agent.loan_action().unwrap();
+    (answer.round, answer.agent, answer.n_trials) = (6, 1, 0);
+    answer.send().unwrap();
+
+    let action = world.waiter().wait(&"action of round 6", BOUND, || world.try_action()).unwrap();
+    assert_eq!((action.round, action.agent), (6, 1), "the abandoned loan must not arrive");
+    assert!(world.try_action().unwrap().is_none(), "exactly one action was sent");
+}
+
+#[test]
+fn the_supervisor_sleeps_until_the_world_wakes_it() {
+    let config = run("sleep");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    world.wait_for_peers(0, true, BOUND).unwrap();
+    for episode in 0..flockstep_proto::transport::EPISODE_WAKE_EVERY {
+        world.publish_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
+    }
+    // The wake-up came with the last record: the sleep ends at once, not at its bound.
+    let long = Duration::from_secs(60);
+    let started = std::time::Instant::now();
+    supervisor.waiter().sleep(long).unwrap();
+    let slept = started.elapsed();
+    assert!(slept < long / 4, "slept {slept:?}: the world's wake-up was lost");
+    let mut drained = 0;
+    while supervisor.try_episode().unwrap().is_some() {
+        drained += 1;
+    }
+    assert_eq!(drained, flockstep_proto::transport::EPISODE_WAKE_EVERY);
+}
+
+#[test]
 fn a_wait_that_times_out_says_what_it_waited_for() {
     let config = run("timeout");
     let _world = RunServices::create(&config).unwrap().into_world().unwrap();
