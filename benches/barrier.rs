@@ -19,12 +19,7 @@ use flockstep_proto::MAX_AGENTS;
 use raw_barrier::{measure, Error, Measurement};
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let result = raw_barrier::run_child(&args).unwrap_or_else(|| parent(&args));
-    if let Err(e) = result {
-        eprintln!("barrier: {e}");
-        std::process::exit(1);
-    }
+    raw_barrier::bench_main("barrier", parent);
 }
 
 fn parent(args: &[String]) -> Result<(), Error> {

@@ -46,12 +46,7 @@ const FIRST_PROBE: f64 = 64.0;
 const FIRST_PROBE_ROUNDS: f64 = 10_000.0;
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let result = raw_barrier::run_child(&args).unwrap_or_else(|| parent(&args));
-    if let Err(e) = result {
-        eprintln!("throughput: {e}");
-        std::process::exit(1);
-    }
+    raw_barrier::bench_main("throughput", parent);
 }
 
 struct Options {

@@ -31,6 +31,16 @@ pub fn run_child(args: &[String]) -> Option<Result<(), Error>> {
     }
 }
 
+/// A bench's `main`: runs this process as a barrier child if its arguments ask for one,
+/// else as the parent (`parent`); prints an error as `<bench>: <error>` and exits with 1.
+pub fn bench_main(bench: &str, parent: impl FnOnce(&[String]) -> Result<(), Error>) {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if let Err(e) = run_child(&args).unwrap_or_else(|| parent(&args)) {
+        eprintln!("{bench}: {e}");
+        std::process::exit(1);
+    }
+}
+
 /// What one child process needs to know, passed as positional arguments.
 struct ChildArgs {
     run_id: String,
