@@ -17,7 +17,8 @@ use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut::SampleMut;
-use iceoryx2::service::port_factory::event;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
 /// The world wakes the supervisor once per this many episode records (a quarter of what
@@ -51,34 +52,12 @@ impl RunServices {
             .create()
             .map_err(|e| self.port_err(EPISODES, "creating the publisher", e))?;
         Ok(WorldPorts {
-            observations: self
-                .observations
-                .publisher_builder()
-                .max_loaned_samples(1)
-                .create()
-                .map_err(|e| self.port_err(OBSERVATIONS, "creating the publisher", e))?,
-            actions: self
-                .actions
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(ACTIONS, "creating the subscriber", e))?,
+            observations: self.publisher(&self.observations, OBSERVATIONS)?,
+            actions: self.subscriber(&self.actions, ACTIONS)?,
             episodes,
-            control: self
-                .control
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(CONTROL, "creating the subscriber", e))?,
-            join: self
-                .join
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(JOIN, "creating the subscriber", e))?,
-            run_info: self
-                .run_info
-                .publisher_builder()
-                .max_loaned_samples(1)
-                .create()
-                .map_err(|e| self.port_err(RUN_INFO, "creating the publisher", e))?,
+            control: self.subscriber(&self.control, CONTROL)?,
+            join: self.subscriber(&self.join, JOIN)?,
+            run_info: self.publisher(&self.run_info, RUN_INFO)?,
             wake_agents: self.notifier(&self.wake_agents, WAKE_AGENTS)?,
             wake_supervisor: self.notifier(&self.wake_supervisor, WAKE_SUPERVISOR)?,
             episodes_published: std::cell::Cell::new(0),
@@ -92,28 +71,10 @@ impl RunServices {
     pub fn into_agent(self) -> Result<AgentPorts, TransportError> {
         let waiter = self.waiter(&self.wake_agents, WAKE_AGENTS)?;
         Ok(AgentPorts {
-            run_info: self
-                .run_info
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(RUN_INFO, "creating the subscriber", e))?,
-            join: self
-                .join
-                .publisher_builder()
-                .max_loaned_samples(1)
-                .create()
-                .map_err(|e| self.port_err(JOIN, "creating the publisher", e))?,
-            observations: self
-                .observations
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(OBSERVATIONS, "creating the subscriber", e))?,
-            actions: self
-                .actions
-                .publisher_builder()
-                .max_loaned_samples(1)
-                .create()
-                .map_err(|e| self.port_err(ACTIONS, "creating the publisher", e))?,
+            run_info: self.subscriber(&self.run_info, RUN_INFO)?,
+            join: self.publisher(&self.join, JOIN)?,
+            observations: self.subscriber(&self.observations, OBSERVATIONS)?,
+            actions: self.publisher(&self.actions, ACTIONS)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
             services: self,
@@ -124,21 +85,36 @@ impl RunServices {
     pub fn into_supervisor(self) -> Result<SupervisorPorts, TransportError> {
         let waiter = self.waiter(&self.wake_supervisor, WAKE_SUPERVISOR)?;
         Ok(SupervisorPorts {
-            episodes: self
-                .episodes
-                .subscriber_builder()
-                .create()
-                .map_err(|e| self.port_err(EPISODES, "creating the subscriber", e))?,
-            control: self
-                .control
-                .publisher_builder()
-                .max_loaned_samples(1)
-                .create()
-                .map_err(|e| self.port_err(CONTROL, "creating the publisher", e))?,
+            episodes: self.subscriber(&self.episodes, EPISODES)?,
+            control: self.publisher(&self.control, CONTROL)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
             services: self,
         })
+    }
+
+    /// A publisher on `service` that loans one sample at a time.
+    fn publisher<T: Debug + ZeroCopySend>(
+        &self,
+        service: &publish_subscribe::PortFactory<Ipc, T, ()>,
+        what: &str,
+    ) -> Result<Publisher<Ipc, T, ()>, TransportError> {
+        service
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| self.port_err(what, "creating the publisher", e))
+    }
+
+    fn subscriber<T: Debug + ZeroCopySend>(
+        &self,
+        service: &publish_subscribe::PortFactory<Ipc, T, ()>,
+        what: &str,
+    ) -> Result<Subscriber<Ipc, T, ()>, TransportError> {
+        service
+            .subscriber_builder()
+            .create()
+            .map_err(|e| self.port_err(what, "creating the subscriber", e))
     }
 
     fn notifier(
