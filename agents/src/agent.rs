@@ -14,8 +14,7 @@ use crate::learning::{LearnParams, StateId};
 use crate::state::StateSpace;
 use crate::uav::Body;
 use flockstep_proto::{
-    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_AGENTS,
-    MAX_TRIALS,
+    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_TRIALS,
 };
 use flockstep_world::scenario::Scenario;
 use rand::SeedableRng;
@@ -298,7 +297,7 @@ pub struct UavAgent {
 
 impl UavAgent {
     pub fn new(spec: &AgentSpec) -> Result<UavAgent, AgentError> {
-        if spec.slot >= spec.scenario.n_routes().min(MAX_AGENTS) {
+        if spec.slot >= spec.scenario.agent_slots() {
             return Err(AgentError::NoRoute {
                 slot: spec.slot,
                 scenario: spec.scenario.name().to_string(),
@@ -311,7 +310,7 @@ impl UavAgent {
         spec.params.validate().map_err(AgentError::Params)?;
         let trials =
             (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
-        Ok(UavAgent { slot: spec.slot, slots: spec.scenario.n_routes().min(MAX_AGENTS), trials })
+        Ok(UavAgent { slot: spec.slot, slots: spec.scenario.agent_slots(), trials })
     }
 
     pub fn slot(&self) -> usize {

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use flockstep_proto::{Heading, Height, Pose};
+use flockstep_proto::{Heading, Height, Pose, MAX_AGENTS};
 
 use crate::error::WorldError;
 use crate::map::{fact_poses, parse_map, pose_key, target_label, Expect, MapFile};
@@ -163,6 +163,12 @@ impl Scenario {
     /// Number of routes, i.e. of UAVs the map can hold.
     pub fn n_routes(&self) -> usize {
         self.map.routes.len()
+    }
+
+    /// Agent slots of a run on this map: one per route, at most `MAX_AGENTS`. Every
+    /// observation carries this many.
+    pub fn agent_slots(&self) -> usize {
+        self.n_routes().min(MAX_AGENTS)
     }
 
     /// Number of waypoints of UAV `uav`'s route (0 for an unknown UAV).

@@ -420,7 +420,7 @@ impl World {
 
     /// Agent slots of the run: one per route (at most `MAX_AGENTS`).
     pub fn slots(&self) -> usize {
-        self.trials.first().map_or(0, |t| t.poses.len()).min(MAX_AGENTS)
+        self.trials.first().map_or(0, |t| t.scenario.agent_slots())
     }
 
     /// Admits agent `slot` to the barrier from the next round on; each trial lets it take
