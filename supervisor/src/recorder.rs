@@ -17,6 +17,9 @@ pub struct Recorder {
     last_draw: Instant,
     env_steps: u64,
     live: usize,
+    /// Training episodes recorded since the bar last moved: it moves at each redraw, since
+    /// a move reads the clock and records come by the thousand.
+    unshown: u64,
 }
 
 impl Recorder {
@@ -35,7 +38,7 @@ impl Recorder {
             .progress_chars("=> "),
         );
         let now = Instant::now();
-        Recorder { collector, bar, started: now, last_draw: now, env_steps: 0, live: 0 }
+        Recorder { collector, bar, started: now, last_draw: now, env_steps: 0, live: 0, unshown: 0 }
     }
 
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
@@ -48,13 +51,14 @@ impl Recorder {
         self.env_steps += duration * u64::from(report.members.count_ones());
         self.live = report.live.count_ones() as usize;
         if report.phase == Phase::Train as u8 {
-            self.bar.inc(1);
+            self.unshown += 1;
         }
         Ok(())
     }
 
     /// Redraws the progress message, at most a few times a second.
     pub fn redraw(&mut self) {
+        self.bar.inc(std::mem::take(&mut self.unshown));
         if self.last_draw.elapsed() < Duration::from_millis(200) {
             return;
         }

@@ -111,23 +111,26 @@ impl Collector {
             }
             let length = report.lengths[slot];
             let truncated = report.truncated >> slot & 1;
-            let line = format!(
-                "{},{},{},{},{},{}\n",
+            let csv = match phase {
+                Phase::Train => &mut self.episodes_csv,
+                Phase::Eval => &mut self.greedy_csv,
+            };
+            writeln!(
+                csv,
+                "{},{},{},{},{},{}",
                 trial,
                 slot + 1,
                 report.episode,
                 report.start_tick,
                 length,
                 truncated
-            );
+            )?;
             match phase {
                 Phase::Train => {
-                    self.episodes_csv.write_all(line.as_bytes())?;
                     self.train[slot][trial].push(length);
                     self.train_truncated[slot] += truncated;
                 }
                 Phase::Eval => {
-                    self.greedy_csv.write_all(line.as_bytes())?;
                     let entry = match self.plan.block_of(report.episode) {
                         Some(block) => &mut self.periodic[slot][block],
                         None => &mut self.greedy[slot][trial],
