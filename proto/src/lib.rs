@@ -29,7 +29,7 @@ pub use pose::{Command, Heading, Height, Pose};
 pub use world_to_agent::{
     AgentView, Observation, ObservationKind, Phase, RunInfo, TrialHeader, TrialObservation,
 };
-pub use world_to_supervisor::EpisodeReport;
+pub use world_to_supervisor::{EpisodeBatch, EpisodeReport, EPISODE_BATCH};
 
 /// A field received from another process held a value outside its range.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -30,7 +30,7 @@ fn observation(round: u64) -> impl FnOnce(&mut Observation) {
 #[test]
 fn world_agent_and_supervisor_exchange_every_message() {
     let config = run("roundtrip");
-    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
     let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     world.wait_for_peers(1, true, BOUND).unwrap();
@@ -46,7 +46,8 @@ fn world_agent_and_supervisor_exchange_every_message() {
     let action = world.waiter().wait(&"action of round 7", BOUND, || world.try_action()).unwrap();
     assert_eq!((action.round, action.agent), (7, 3));
 
-    world.publish_episode(&EpisodeReport { episode: 11, ..EpisodeReport::default() }).unwrap();
+    world.queue_episode(&EpisodeReport { episode: 11, ..EpisodeReport::default() }).unwrap();
+    world.flush_episodes().unwrap();
     let report =
         supervisor.waiter().wait(&"episode 11", BOUND, || supervisor.try_episode()).unwrap();
     assert_eq!(report.episode, 11);
@@ -136,13 +137,15 @@ fn an_action_loan_dropped_unsent_sends_nothing() {
 #[test]
 fn the_supervisor_sleeps_until_the_world_wakes_it() {
     let config = run("sleep");
-    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
     let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     world.wait_for_peers(0, true, BOUND).unwrap();
+    // Full batches go out without a flush; the wake-up comes with the batch that completes
+    // `EPISODE_WAKE_EVERY` records.
     for episode in 0..flockstep_proto::transport::EPISODE_WAKE_EVERY {
-        world.publish_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
+        world.queue_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
     }
-    // The wake-up came with the last record: the sleep ends at once, not at its bound.
+    // The sleep ends at once, not at its bound.
     let long = Duration::from_secs(60);
     let started = std::time::Instant::now();
     supervisor.waiter().sleep(long).unwrap();
@@ -321,12 +324,13 @@ fn the_world_removes_a_killed_agent() {
 #[test]
 fn episode_records_outlive_the_world_that_sent_them() {
     let config = run("outlive");
-    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
     let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     let sent = flockstep_proto::transport::EPISODE_BUFFER as u64;
     for episode in 0..sent {
-        world.publish_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
+        world.queue_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
     }
+    world.flush_episodes().unwrap();
     drop(world);
     let mut received = Vec::new();
     while let Some(report) = supervisor.try_episode().unwrap() {
@@ -336,15 +340,38 @@ fn episode_records_outlive_the_world_that_sent_them() {
 }
 
 #[test]
+fn queued_episode_records_wait_for_a_full_batch_or_a_flush() {
+    let config = run("batch");
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    let queued = flockstep_proto::EPISODE_BATCH as u64 + 3;
+    for episode in 0..queued {
+        world.queue_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
+    }
+    let mut received = Vec::new();
+    while let Some(report) = supervisor.try_episode().unwrap() {
+        received.push(report.episode);
+    }
+    let full: Vec<u64> = (0..flockstep_proto::EPISODE_BATCH as u64).collect();
+    assert_eq!(received, full, "only the full batch went out");
+    world.flush_episodes().unwrap();
+    while let Some(report) = supervisor.try_episode().unwrap() {
+        received.push(report.episode);
+    }
+    assert_eq!(received, (0..queued).collect::<Vec<_>>(), "the flush sent the rest, in order");
+}
+
+#[test]
 fn a_full_episode_buffer_fails_after_the_report_timeout_instead_of_dropping() {
     let mut config = run("stalled");
     config.report_timeout = Duration::from_millis(50);
-    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
     let _idle_supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     let report = EpisodeReport::default();
     for _ in 0..flockstep_proto::transport::EPISODE_BUFFER {
-        world.publish_episode(&report).unwrap();
+        world.queue_episode(&report).unwrap();
     }
-    let error = world.publish_episode(&report).unwrap_err();
+    world.queue_episode(&report).unwrap();
+    let error = world.flush_episodes().unwrap_err();
     assert!(matches!(error, TransportError::ReportsStalled { .. }), "{error}");
 }

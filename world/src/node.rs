@@ -243,8 +243,16 @@ impl WorldNode {
     /// does not shape the round waits for then: the episode records of the round before, and
     /// reading join requests and control commands (acted on in the next round). Those are
     /// rare, and each look costs two reads of iceoryx2 queues, so the world looks once per
-    /// [`LOOK_FOR_REQUESTS_EVERY`], not every round.
+    /// [`LOOK_FOR_REQUESTS_EVERY`], not every round, and sends the records it queued then.
+    /// Whatever ends the rounds, the queued records are sent: a failed run keeps them too.
     fn barrier(&mut self) -> Result<()> {
+        let rounds = self.rounds();
+        let flushed = self.ports.flush_episodes();
+        rounds?;
+        Ok(flushed?)
+    }
+
+    fn rounds(&mut self) -> Result<()> {
         let mut reports = Vec::new();
         let mut stop_requested = false;
         let mut last_look = Instant::now();
@@ -267,10 +275,11 @@ impl WorldNode {
                 };
             })?;
             for report in reports.drain(..) {
-                self.ports.publish_episode(&report)?;
+                self.ports.queue_episode(&report)?;
             }
             if last_look.elapsed() >= LOOK_FOR_REQUESTS_EVERY {
                 last_look = Instant::now();
+                self.ports.flush_episodes()?;
                 while let Some(request) = self.ports.try_join()? {
                     self.members.waiting.push(request);
                 }
@@ -384,7 +393,8 @@ struct Answers {
     gone: u64,
 }
 
-/// How often the world reads join requests and control commands.
+/// How often the world reads join requests and control commands, and sends the episode
+/// records it queued.
 const LOOK_FOR_REQUESTS_EVERY: Duration = Duration::from_millis(1);
 
 /// How long a round may take before the world checks whether the missing agents live.

@@ -8,7 +8,7 @@ use super::{
 };
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
-use crate::{Action, EpisodeReport, JoinRequest, Observation, RunInfo};
+use crate::{Action, EpisodeBatch, EpisodeReport, JoinRequest, Observation, RunInfo};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -60,7 +60,8 @@ impl RunServices {
             run_info: self.publisher(&self.run_info, RUN_INFO)?,
             wake_agents: self.notifier(&self.wake_agents, WAKE_AGENTS)?,
             wake_supervisor: self.notifier(&self.wake_supervisor, WAKE_SUPERVISOR)?,
-            episodes_published: std::cell::Cell::new(0),
+            batch: Box::default(),
+            episodes_published: 0,
             waiter: self.waiter(&self.wake_world, WAKE_WORLD)?,
             services: self,
         })
@@ -86,6 +87,7 @@ impl RunServices {
         let waiter = self.waiter(&self.wake_supervisor, WAKE_SUPERVISOR)?;
         Ok(SupervisorPorts {
             episodes: self.subscriber(&self.episodes, EPISODES)?,
+            received: std::cell::RefCell::new(None),
             control: self.publisher(&self.control, CONTROL)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
@@ -173,13 +175,15 @@ pub struct Peers {
 pub struct WorldPorts {
     observations: Publisher<Ipc, Observation, ()>,
     actions: Subscriber<Ipc, Action, ()>,
-    episodes: Publisher<Ipc, EpisodeReport, ()>,
+    episodes: Publisher<Ipc, EpisodeBatch, ()>,
     control: Subscriber<Ipc, Control, ()>,
     join: Subscriber<Ipc, JoinRequest, ()>,
     run_info: Publisher<Ipc, RunInfo, ()>,
     wake_agents: Notifier<Ipc>,
     wake_supervisor: Notifier<Ipc>,
-    episodes_published: std::cell::Cell<u64>,
+    /// Records queued and not yet sent.
+    batch: Box<EpisodeBatch>,
+    episodes_published: u64,
     waiter: Waiter,
     services: RunServices,
 }
@@ -213,10 +217,36 @@ impl WorldPorts {
         self.actions.receive().map_err(|e| self.err(ACTIONS, "receiving", e))
     }
 
-    /// Hands one record to the supervisor. Waits (bounded by `report_timeout`) while the
+    /// Queues one record for the supervisor; a full batch is sent at once. Queued records
+    /// go out at the next [`WorldPorts::flush_episodes`].
+    pub fn queue_episode(&mut self, report: &EpisodeReport) -> Result<(), TransportError> {
+        if !self.batch.push(report) {
+            self.flush_episodes()?;
+            self.batch.push(report);
+        }
+        if self.batch.is_full() {
+            self.flush_episodes()?;
+        }
+        Ok(())
+    }
+
+    /// Sends the queued records, if any. Waits (bounded by `report_timeout`) while the
     /// supervisor's buffer is full; never drops a record silently.
-    pub fn publish_episode(&self, report: &EpisodeReport) -> Result<(), TransportError> {
-        match self.episodes.send_copy(*report) {
+    pub fn flush_episodes(&mut self) -> Result<(), TransportError> {
+        if self.batch.is_empty() {
+            return Ok(());
+        }
+        let loan =
+            self.episodes.loan_uninit().map_err(|e| self.err(EPISODES, "loaning a sample", e))?;
+        // SAFETY: `EpisodeBatch` is made of integers only, so every byte pattern is a valid
+        // value, and a sample's memory is always initialised (zero-filled shared memory when
+        // created, earlier batches after that). The supervisor reads `count` and only the
+        // records below it, which are written here.
+        let mut sample = unsafe { loan.assume_init() };
+        let count = self.batch.count as usize;
+        sample.count = self.batch.count;
+        sample.reports[..count].copy_from_slice(&self.batch.reports[..count]);
+        match sample.send() {
             Ok(_) => {}
             Err(SendError::UnableToDeliver) => {
                 return Err(TransportError::ReportsStalled {
@@ -227,12 +257,13 @@ impl WorldPorts {
             }
             Err(e) => return Err(self.err(EPISODES, "sending", e)),
         }
+        self.batch.count = 0;
         // Waking the supervisor for every record cost the barrier about a quarter of its
-        // rounds (measured by `benches/throughput.rs`): it is woken for every
-        // `EPISODE_WAKE_EVERY`-th record and otherwise drains the buffer on its own schedule.
-        let published = self.episodes_published.get() + 1;
-        self.episodes_published.set(published);
-        if published.is_multiple_of(EPISODE_WAKE_EVERY) {
+        // rounds (measured by `benches/throughput.rs`): it is woken each time another
+        // `EPISODE_WAKE_EVERY` records went out and otherwise drains on its own schedule.
+        let before = self.episodes_published;
+        self.episodes_published += count as u64;
+        if self.episodes_published / EPISODE_WAKE_EVERY > before / EPISODE_WAKE_EVERY {
             self.wake_supervisor.notify().map_err(|e| self.err(WAKE_SUPERVISOR, "notifying", e))?;
         }
         Ok(())
@@ -442,9 +473,17 @@ impl std::ops::DerefMut for ActionLoan<'_> {
     }
 }
 
+/// The batch of episode records the supervisor is reading.
+struct ReceivedBatch {
+    batch: Sample<Ipc, EpisodeBatch, ()>,
+    /// Records already handed out.
+    handed_out: usize,
+}
+
 /// The supervisor's side: reads episode records, sends control commands.
 pub struct SupervisorPorts {
-    episodes: Subscriber<Ipc, EpisodeReport, ()>,
+    episodes: Subscriber<Ipc, EpisodeBatch, ()>,
+    received: std::cell::RefCell<Option<ReceivedBatch>>,
     control: Publisher<Ipc, Control, ()>,
     wake_world: Notifier<Ipc>,
     waiter: Waiter,
@@ -452,13 +491,31 @@ pub struct SupervisorPorts {
 }
 
 impl SupervisorPorts {
-    /// The next episode record, if any.
+    /// The next episode record, if any, in the order the world sent them.
     pub fn try_episode(&self) -> Result<Option<EpisodeReport>, TransportError> {
-        let sample = self
-            .episodes
-            .receive()
-            .map_err(|e| port_error(&self.services.run.run_id, EPISODES, "receiving", e))?;
-        Ok(sample.map(|s| *s))
+        let run = &self.services.run.run_id;
+        let mut received = self.received.borrow_mut();
+        loop {
+            if let Some(current) = received.as_mut() {
+                let reports = current
+                    .batch
+                    .reports()
+                    .map_err(|e| port_error(run, EPISODES, "reading a batch", e))?;
+                if let Some(report) = reports.get(current.handed_out) {
+                    current.handed_out += 1;
+                    return Ok(Some(*report));
+                }
+            }
+            let next =
+                self.episodes.receive().map_err(|e| port_error(run, EPISODES, "receiving", e))?;
+            match next {
+                Some(batch) => *received = Some(ReceivedBatch { batch, handed_out: 0 }),
+                None => {
+                    *received = None;
+                    return Ok(None);
+                }
+            }
+        }
     }
 
     /// Sends a command and wakes the world, which may be blocked waiting for agents.

@@ -7,7 +7,7 @@ use super::{
 use crate::limits::MAX_AGENTS;
 use crate::services::{self, ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
-use crate::{Action, EpisodeReport, JoinRequest, Observation, RunInfo};
+use crate::{Action, EpisodeBatch, JoinRequest, Observation, RunInfo, EPISODE_BATCH};
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::{EventCreateError, EventOpenError};
 use iceoryx2::service::builder::publish_subscribe::{
@@ -22,7 +22,8 @@ use std::time::{Duration, Instant};
 pub const SPARE: usize = 4;
 /// Nodes one run may hold: every agent, the world, the supervisor and the spares.
 pub const MAX_NODES: usize = MAX_AGENTS + 2 + SPARE;
-/// Episode records the supervisor's buffer holds before the world has to wait for it.
+/// Episode records the supervisor's buffer holds before the world has to wait for it
+/// (in batches of [`EPISODE_BATCH`]).
 pub const EPISODE_BUFFER: usize = 8192;
 /// Pause between attempts while the world has not created a service yet.
 const OPEN_RETRY: Duration = Duration::from_millis(5);
@@ -65,7 +66,7 @@ const ACTIONS_QOS: PubSubQos = PubSubQos {
 const EPISODES_QOS: PubSubQos = PubSubQos {
     publishers: 1,
     subscribers: 1 + 1,
-    buffer: EPISODE_BUFFER,
+    buffer: EPISODE_BUFFER / EPISODE_BATCH,
     history: 0,
     safe_overflow: false,
 };
@@ -145,7 +146,7 @@ fn wake(
 pub struct RunServices {
     pub(super) observations: publish_subscribe::PortFactory<Ipc, Observation, ()>,
     pub(super) actions: publish_subscribe::PortFactory<Ipc, Action, ()>,
-    pub(super) episodes: publish_subscribe::PortFactory<Ipc, EpisodeReport, ()>,
+    pub(super) episodes: publish_subscribe::PortFactory<Ipc, EpisodeBatch, ()>,
     pub(super) control: publish_subscribe::PortFactory<Ipc, Control, ()>,
     pub(super) join: publish_subscribe::PortFactory<Ipc, JoinRequest, ()>,
     pub(super) run_info: publish_subscribe::PortFactory<Ipc, RunInfo, ()>,
@@ -179,7 +180,7 @@ impl RunServices {
             actions: pubsub::<Action>(node, &act_name, &ACTIONS_QOS)
                 .create()
                 .map_err(|e| created(&act_name, e.into()))?,
-            episodes: pubsub::<EpisodeReport>(node, &epi_name, &EPISODES_QOS)
+            episodes: pubsub::<EpisodeBatch>(node, &epi_name, &EPISODES_QOS)
                 .create()
                 .map_err(|e| created(&epi_name, e.into()))?,
             control: pubsub::<Control>(node, &ctl_name, &CONTROL_QOS)
@@ -225,7 +226,7 @@ impl RunServices {
                 pubsub::<Action>(node, &act_name, &ACTIONS_QOS).open()
             })?,
             episodes: retry(run, &epi_name, deadline, || {
-                pubsub::<EpisodeReport>(node, &epi_name, &EPISODES_QOS).open()
+                pubsub::<EpisodeBatch>(node, &epi_name, &EPISODES_QOS).open()
             })?,
             control: retry(run, &ctl_name, deadline, || {
                 pubsub::<Control>(node, &ctl_name, &CONTROL_QOS).open()
