@@ -247,7 +247,13 @@ impl WorldNode {
     /// Whatever ends the rounds, the queued records are sent: a failed run keeps them too.
     fn barrier(&mut self) -> Result<()> {
         let rounds = self.rounds();
-        let flushed = self.ports.flush_episodes();
+        // Unless a stalled supervisor is what failed: sending again would only wait again.
+        let stalled = rounds
+            .as_ref()
+            .err()
+            .and_then(|e| e.downcast_ref::<TransportError>())
+            .is_some_and(|e| matches!(e, TransportError::ReportsStalled { .. }));
+        let flushed = if stalled { Ok(()) } else { self.ports.flush_episodes() };
         rounds?;
         Ok(flushed?)
     }
@@ -327,6 +333,9 @@ impl WorldNode {
     ) -> Result<Answers> {
         let Self { world, ports, members, .. } = self;
         let (round, live) = (this_round.number, this_round.live);
+        // The clock is read for the death check only once the waiter has begun to block.
+        let policy = ports.waiter().policy();
+        let quick_polls = policy.spins + policy.yields;
         let mut failed_polls = 0u32;
         let mut slow_since = None;
         let mut answers = Answers::default();
@@ -364,9 +373,8 @@ impl WorldNode {
                     return Ok(Some(()));
                 }
                 // Rounds take microseconds: only a round this slow is worth a look at processes.
-                // The clock is read only once the round outlasted the waiter's quick polls.
                 failed_polls += 1;
-                if failed_polls <= POLLS_BEFORE_CLOCK_READS {
+                if failed_polls <= quick_polls {
                     return Ok(None);
                 }
                 let since = *slow_since.get_or_insert_with(Instant::now);
@@ -409,13 +417,10 @@ const LOOK_FOR_REQUESTS_EVERY: Duration = Duration::from_millis(1);
 /// How long a round may take before the world checks whether the missing agents live.
 const DEATH_CHECK_AFTER: Duration = Duration::from_millis(20);
 
-/// A clock read costs about 27 ns here, half a percent of a round, and the world's rounds
-/// read it for nothing but rare events. It looks at the clock for requests every this many
-/// rounds (about 0.1 ms at 2 UAVs, 1.6 ms at 32)...
+/// A clock read costs about 27 ns here, half a percent of a round, and rounds used to read
+/// it for nothing but rare events. The world reads it for requests every this many rounds
+/// (about 0.1 ms at 2 UAVs, 1.6 ms at 32), and for dead agents only once its waiter blocks.
 const ROUNDS_BETWEEN_CLOCK_READS: u64 = 16;
-/// ...and for dead agents only in a round that outlasted this many failed polls (the
-/// waiter's yields; every later poll follows a block of up to 10 ms).
-const POLLS_BEFORE_CLOCK_READS: u32 = 16;
 
 /// The slots whose bits are set in `mask`.
 fn slots(mask: u64) -> impl Iterator<Item = usize> {

@@ -220,10 +220,12 @@ impl WorldPorts {
     /// Queues one record for the supervisor; a full batch is sent at once. Queued records
     /// go out at the next [`WorldPorts::flush_episodes`].
     pub fn queue_episode(&mut self, report: &EpisodeReport) -> Result<(), TransportError> {
-        if !self.batch.push(report) {
+        if self.batch.is_full() {
+            // Left full by a send that failed.
             self.flush_episodes()?;
-            self.batch.push(report);
         }
+        let queued = self.batch.push(report);
+        debug_assert!(queued, "the batch has room after a flush");
         if self.batch.is_full() {
             self.flush_episodes()?;
         }

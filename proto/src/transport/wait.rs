@@ -56,6 +56,10 @@ impl Waiter {
         Waiter { listener, policy, run_id: run_id.into(), service: service.into() }
     }
 
+    pub fn policy(&self) -> WaitPolicy {
+        self.policy
+    }
+
     /// Calls `poll` until it returns `Some`, for at most `timeout`. `what` names the awaited
     /// thing in the error (pass `&format_args!(..)`: it is only formatted on failure).
     ///
