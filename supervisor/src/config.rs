@@ -3,7 +3,6 @@
 use crate::cli::{Restart, RunArgs, Transport};
 use anyhow::{bail, Context, Result};
 use flockstep_agents::agent::AgentSpec;
-
 use flockstep_agents::bt::render::to_text;
 use flockstep_agents::bt::spec::TreeSpec;
 use flockstep_agents::comm::CommMode;

@@ -56,6 +56,7 @@ impl Waiter {
         Waiter { listener, policy, run_id: run_id.into(), service: service.into() }
     }
 
+    /// How this waiter spins, yields and blocks (the world times its death check by it).
     pub fn policy(&self) -> WaitPolicy {
         self.policy
     }
