@@ -76,24 +76,16 @@ fn parent(args: &[String]) -> Result<(), Error> {
         let mut baseline = None;
         for (policy, mut measured) in policies.iter().zip(runs) {
             measured.sort_by(|a, b| a.rate().total_cmp(&b.rate()));
-            let median = &measured[measured.len() / 2];
-            let base = *baseline.get_or_insert(median.rate());
+            let sorted: Vec<&Measurement> = measured.iter().collect();
+            let rate = sorted[sorted.len() / 2].rate();
+            let base = *baseline.get_or_insert(rate);
             println!(
-                "barrier agents={n} strategy={} spins={} yields={} rounds_per_s={:.0} \
-                 vs_first={:.2} min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.1} \
-                 repeats={repeats} load1={:.2} leftover_files={}",
+                "barrier agents={n} strategy={} spins={} yields={} vs_first={:.2} {}",
                 strategy(policy),
                 policy.spins,
                 policy.yields,
-                median.rate(),
-                median.rate() / base,
-                measured[0].rate(),
-                measured[measured.len() - 1].rate(),
-                median.p50_us,
-                median.p99_us,
-                median.cpu_us / median.rounds.max(1) as f64,
-                median.load1,
-                measured.iter().map(|m| m.leftover).sum::<usize>(),
+                rate / base,
+                Measurement::describe(&sorted),
             );
         }
     }

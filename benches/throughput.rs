@@ -196,24 +196,13 @@ fn number(value: f64) -> String {
 }
 
 fn print_raw(sorted: &[&Measurement], uavs: usize, options: &Options) {
-    let median = sorted[sorted.len() / 2];
     let policy = WaitPolicy::default();
     println!(
-        "throughput what=raw-barrier agents={uavs} spins={} yields={} rounds_per_s={:.0} \
-         min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.2} seconds={} \
-         repeats={} load1={:.2} leftover_files={}",
+        "throughput what=raw-barrier agents={uavs} spins={} yields={} seconds={} {}",
         policy.spins,
         policy.yields,
-        median.rate(),
-        sorted[0].rate(),
-        sorted[sorted.len() - 1].rate(),
-        median.p50_us,
-        median.p99_us,
-        median.cpu_us / median.rounds.max(1) as f64,
         options.seconds,
-        options.repeats,
-        median.load1,
-        sorted.iter().map(|m| m.leftover).sum::<usize>(),
+        Measurement::describe(sorted),
     );
 }
 

@@ -188,6 +188,26 @@ impl Measurement {
     pub fn rate(&self) -> f64 {
         self.rounds as f64 / self.seconds
     }
+
+    /// The fields both benches print for repeats of one barrier configuration, sorted by
+    /// rate: the median's rate, the range, the median's latencies and CPU, and the files
+    /// left over by any repeat.
+    pub fn describe(sorted: &[&Measurement]) -> String {
+        let median = sorted[sorted.len() / 2];
+        format!(
+            "rounds_per_s={:.0} min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.2} \
+             repeats={} load1={:.2} leftover_files={}",
+            median.rate(),
+            sorted[0].rate(),
+            sorted[sorted.len() - 1].rate(),
+            median.p50_us,
+            median.p99_us,
+            median.cpu_us / median.rounds.max(1) as f64,
+            sorted.len(),
+            median.load1,
+            sorted.iter().map(|m| m.leftover).sum::<usize>(),
+        )
+    }
 }
 
 /// Runs the barrier of one world and `agents` agents, all waiting with `policy`, for
