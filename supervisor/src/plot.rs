@@ -67,6 +67,8 @@ pub fn plot_curves(
         .configure_mesh()
         .x_desc("iterations (episodes)")
         .y_desc("episode length (ticks)")
+        // Episodes are whole numbers.
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .draw()
         .map_err(|e| err(&e))?;
     for (i, s) in series.iter().enumerate() {
@@ -97,4 +99,26 @@ pub fn plot_curves(
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn episode_axis_labels_are_whole_numbers() {
+        let path = std::env::temp_dir().join(format!("flockstep-plot-{}.svg", std::process::id()));
+        let values: Vec<f64> = (0..=10_000).map(|e| 100.0 - e as f64 / 200.0).collect();
+        let series = [Series::from_values("UAV1".into(), &values)];
+        let optimum = [Reference { label: "optimum".into(), value: 11.5 }];
+        plot_curves(&path, "test", &series, &optimum).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        // The SVG backend writes each text on a line of its own.
+        let texts: Vec<&str> = svg.lines().map(str::trim).collect();
+        let numbers: Vec<&&str> = texts.iter().filter(|t| t.parse::<f64>().is_ok()).collect();
+        assert!(texts.contains(&"2000"), "no episode tick label 2000 among {numbers:?}");
+        assert!(!texts.contains(&"2000.0"), "episode tick labels carry decimals");
+        assert!(texts.contains(&"optimum (11.50)"), "the reference line's legend is missing");
+    }
 }
