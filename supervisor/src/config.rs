@@ -167,13 +167,17 @@ pub fn default_comm(uavs: usize) -> CommMode {
     }
 }
 
-/// Checks that `dir` holds a snapshot for every agent and trial; returns `dir`.
+/// Checks that `dir` holds a readable snapshot for every agent and trial; returns `dir`.
+/// Whether each fits the run (scenario, tree, communication) is checked when it is loaded.
 fn check_snapshots(dir: &std::path::Path, uavs: usize, trials: usize) -> Result<PathBuf> {
+    use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
     for slot in 0..uavs {
         for trial in 0..trials {
-            let path = flockstep_agents::snapshot::snapshot_path(dir, slot, trial);
+            let path = snapshot_path(dir, slot, trial);
+            let found =
+                read_snapshot(&path).with_context(|| format!("--resume: {}", dir.display()))?;
             anyhow::ensure!(
-                path.is_file(),
+                found.is_some(),
                 "--resume: no snapshot {} (UAV{}, trial {trial})",
                 path.display(),
                 slot + 1
