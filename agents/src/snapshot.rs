@@ -54,11 +54,6 @@ pub enum SnapshotError {
 }
 
 impl Snapshot {
-    pub fn encode(&self) -> Vec<u8> {
-        bincode::serde::encode_to_vec(self, bincode::config::standard())
-            .expect("a snapshot holds only plain data")
-    }
-
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
         let (snapshot, _): (Snapshot, usize) =
             bincode::serde::decode_from_slice(bytes, bincode::config::standard())
@@ -67,27 +62,6 @@ impl Snapshot {
             return Err(SnapshotError::Format { found: snapshot.format });
         }
         Ok(snapshot)
-    }
-
-    /// What `agent` has learned so far.
-    pub fn of(
-        agent: &TrialAgent,
-        scenario: &str,
-        trial: usize,
-        comm: CommMode,
-        tree: &str,
-    ) -> Snapshot {
-        Snapshot {
-            format: FORMAT,
-            scenario: scenario.to_string(),
-            slot: agent.slot() as u32,
-            trial: trial as u32,
-            comm,
-            tree: tree.to_string(),
-            episodes: agent.trained_episodes(),
-            states: agent.states().keys().map(<[u64]>::to_vec).collect(),
-            tables: agent.tree().tables().into_iter().cloned().collect(),
-        }
     }
 
     /// Loads this snapshot into `agent` after checking it was learned on the same setup.
@@ -130,6 +104,54 @@ impl Snapshot {
     }
 }
 
+/// The bytes of a [`Snapshot`] of what `agent` has learned so far, encoded from the agent's
+/// own tables and keys: no copy of them, no vector per state (a snapshot is written while
+/// every process of the barrier waits).
+fn encode_snapshot(
+    agent: &TrialAgent,
+    scenario: &str,
+    trial: usize,
+    comm: CommMode,
+    tree: &str,
+) -> Vec<u8> {
+    let snapshot = SnapshotOf {
+        format: FORMAT,
+        scenario,
+        slot: agent.slot() as u32,
+        trial: trial as u32,
+        comm,
+        tree,
+        episodes: agent.trained_episodes(),
+        states: Keys(agent.states()),
+        tables: agent.tree().tables(),
+    };
+    bincode::serde::encode_to_vec(&snapshot, bincode::config::standard())
+        .expect("a snapshot holds only plain data")
+}
+
+/// [`Snapshot`]'s fields in its order, borrowed: serde writes both alike.
+#[derive(Serialize)]
+struct SnapshotOf<'a> {
+    format: u32,
+    scenario: &'a str,
+    slot: u32,
+    trial: u32,
+    comm: CommMode,
+    tree: &'a str,
+    episodes: u64,
+    states: Keys<'a>,
+    tables: Vec<&'a QTable>,
+}
+
+/// State keys in id order, written as a sequence of sequences like `Vec<Vec<u64>>`.
+struct Keys<'a>(&'a StateSpace);
+
+impl Serialize for Keys<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(self.0.keys())
+    }
+}
+
 /// The snapshot file of agent `slot` (0-based) in trial `trial` under a results directory:
 /// `<out>/qtables/uav<N>_trial<K>.bin`.
 pub fn snapshot_path(out: &Path, slot: usize, trial: usize) -> PathBuf {
@@ -156,16 +178,21 @@ pub fn write_snapshot(
 ) -> std::io::Result<()> {
     let path = snapshot_path(out, agent.slot(), trial);
     let partial = partial_path(&path);
-    let bytes = Snapshot::of(agent, scenario, trial, comm, tree).encode();
-    path.parent()
-        .map_or(Ok(()), std::fs::create_dir_all)
-        .and_then(|()| std::fs::write(&partial, bytes))
-        .and_then(|()| match std::fs::remove_file(&path) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
-            _ => Ok(()),
-        })
-        .and_then(|()| std::fs::rename(&partial, &path))
-        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display())))
+    let bytes = encode_snapshot(agent, scenario, trial, comm, tree);
+    // The directory is there but for the first snapshot: look for it only then.
+    let write = || std::fs::write(&partial, &bytes);
+    match write() {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            path.parent().map_or(Ok(()), std::fs::create_dir_all).and_then(|()| write())
+        }
+        written => written,
+    }
+    .and_then(|()| match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    })
+    .and_then(|()| std::fs::rename(&partial, &path))
+    .map_err(|e| std::io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display())))
 }
 
 /// Where [`write_snapshot`] puts the bytes before they take the place of `path`.
@@ -259,6 +286,30 @@ mod tests {
         }
     }
 
+    impl Snapshot {
+        /// What `agent` has learned so far, built field by field: what the borrowed encoding
+        /// must decode to.
+        fn of(
+            agent: &TrialAgent,
+            scenario: &str,
+            trial: usize,
+            comm: CommMode,
+            tree: &str,
+        ) -> Snapshot {
+            Snapshot {
+                format: FORMAT,
+                scenario: scenario.to_string(),
+                slot: agent.slot() as u32,
+                trial: trial as u32,
+                comm,
+                tree: tree.to_string(),
+                episodes: agent.trained_episodes(),
+                states: agent.states().keys().map(<[u64]>::to_vec).collect(),
+                tables: agent.tree().tables().into_iter().cloned().collect(),
+            }
+        }
+    }
+
     fn uav1() -> UavAgent {
         UavAgent::new(&AgentSpec {
             slot: 0,
@@ -299,6 +350,24 @@ mod tests {
     }
 
     #[test]
+    fn the_borrowed_encoding_writes_the_bytes_of_the_snapshot() {
+        let mut agent = uav1();
+        let part = &mut agent.trials_mut()[0];
+        let words = part.comm().words().len();
+        let keys: Vec<Vec<u64>> = (0..5).map(|i| vec![i; words + 1]).collect();
+        part.set_states(StateSpace::from_keys(words, &keys).unwrap());
+        let mut table = QTable::new(5);
+        table.step(4, 2, -3.5, 1.0);
+        table.step(1, 0, -0.25, 1.0);
+        part.tree_mut().set_tables(vec![table]).unwrap();
+        let owned = Snapshot::of(part, "s3", 0, CommMode::Flags, "tree");
+        let expected = bincode::serde::encode_to_vec(&owned, bincode::config::standard()).unwrap();
+        assert_eq!(encode_snapshot(part, "s3", 0, CommMode::Flags, "tree"), expected);
+        assert_eq!(owned.states.len(), 5);
+        assert_eq!(owned.tables[0].get(4, 2), -3.5);
+    }
+
+    #[test]
     fn a_crash_between_removal_and_rename_leaves_a_snapshot_to_read() {
         let dir = Scratch::new("crash");
         let agent = uav1();
@@ -314,7 +383,7 @@ mod tests {
         let mut agent = uav1();
         let path = write(&agent, &dir.0);
         learn_one_state(&mut agent);
-        let bytes = Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree").encode();
+        let bytes = encode_snapshot(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
         std::fs::write(partial_path(&path), &bytes[..bytes.len() / 2]).unwrap();
         let read = read_snapshot(&path).unwrap().expect("the snapshot before the crash");
         assert!(read.states.is_empty(), "the torn write was read");
