@@ -107,18 +107,15 @@ pub struct TrialAgent {
 }
 
 impl TrialAgent {
-    fn new(spec: &AgentSpec, trial: usize) -> Result<TrialAgent, AgentError> {
-        let rng = Xoshiro256PlusPlus::seed_from_u64(seed::derive(
-            spec.seed,
-            &[seed::AGENT, spec.slot as u64, trial as u64],
-        ));
+    /// One trial of the agent, ticking `tree` (a fresh copy; see [`UavAgent::new`]).
+    fn new(spec: &AgentSpec, tree: Tree) -> TrialAgent {
         let route_lens: Vec<usize> =
             (0..spec.scenario.n_routes()).map(|r| spec.scenario.route_len(r)).collect();
         let comm = CommState::new(spec.comm, spec.slot, &route_lens, spec.scenario.n_targets());
-        Ok(TrialAgent {
+        TrialAgent {
             slot: spec.slot,
             route_len: spec.scenario.route_len(spec.slot),
-            tree: Tree::new(&spec.tree, spec.params, rng)?,
+            tree,
             states: StateSpace::new(comm.words().len()),
             comm,
             scenario: spec.scenario.clone(),
@@ -128,7 +125,7 @@ impl TrialAgent {
             finished: false,
             trained_episodes: 0,
             peers: 0,
-        })
+        }
     }
 
     /// One tick of this trial: reads `obs`, writes this agent's part of the action.
@@ -308,8 +305,16 @@ impl UavAgent {
             return Err(AgentError::Trials { trials: spec.trials, max: MAX_TRIALS });
         }
         spec.params.validate().map_err(AgentError::Params)?;
+        // Each trial has its own RNG stream; the trials' trees share one shape.
+        let rng = |trial: usize| {
+            Xoshiro256PlusPlus::seed_from_u64(seed::derive(
+                spec.seed,
+                &[seed::AGENT, spec.slot as u64, trial as u64],
+            ))
+        };
+        let template = Tree::new(&spec.tree, spec.params, rng(0))?;
         let trials =
-            (0..spec.trials).map(|k| TrialAgent::new(spec, k)).collect::<Result<_, _>>()?;
+            (0..spec.trials).map(|k| TrialAgent::new(spec, template.fresh(rng(k)))).collect();
         Ok(UavAgent { slot: spec.slot, slots: spec.scenario.agent_slots(), trials })
     }
 

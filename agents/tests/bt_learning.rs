@@ -400,3 +400,27 @@ fn a_nested_selector_does_not_make_the_outer_tick_a_child_twice() {
     h.always("a", S).always("b", S).always("c", S);
     h.expect(S, &["b=S", "x=F", "c=S"]);
 }
+
+#[test]
+fn a_fresh_copy_keeps_nothing_the_tree_learned_or_ran() {
+    use rand::SeedableRng;
+    let mut h = Bt::with("LOR 2\n- A-a 0\n- A-b 0\n", P, 1);
+    h.always("a", R).always("b", F);
+    h.expect(R, &["a=R"]);
+    h.ctx.state = 1;
+    h.expect(R, &["a=R"]);
+    let learned = h.table(0);
+    assert_eq!(learned.n_rows(), 1, "Q(0, a) was updated");
+    let mut copy = h.tree.fresh(rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(1));
+    assert_eq!(copy.tables()[0].n_rows(), 0, "a copy starts untrained");
+    std::mem::swap(&mut h.tree, &mut copy);
+    // Unseen states tie, so which child goes first depends on each tree's RNG; A-b fails.
+    h.ctx.state = 2;
+    assert_eq!(h.tick(), R);
+    assert_eq!(h.get("a").progress_seen, [0, 1, 0], "A-a starts afresh in the copy");
+    std::mem::swap(&mut h.tree, &mut copy);
+    assert_eq!(h.table(0), learned, "ticking the copy changed nothing in the original");
+    h.ctx.state = 3;
+    assert_eq!(h.tick(), R);
+    assert_eq!(h.get("a").progress_seen, [0, 1, 0, 2], "the original's A-a runs on");
+}

@@ -1,8 +1,9 @@
 //! A behavior tree at run time: tick semantics, halting, and the learning selector.
 //!
-//! The [`TreeSpec`] is flattened into an arena of nodes whose run-time state (running or
-//! not, memory index, parallel results, decorator counters, action progress) sits next to
-//! the node. Leaves run through a [`TickContext`] callback, so the tree does no I/O and knows
+//! The [`TreeSpec`] is flattened into an arena of nodes, the tree's shape, which the copies
+//! of a tree share (a UAV ticks one copy per trial); each copy keeps its own run-time state
+//! per node (running or not, memory index, decorator counter, action progress), its
+//! parallel nodes' results, its learning selectors and its RNG. Leaves run through a [`TickContext`] callback, so the tree does no I/O and knows
 //! nothing of UAVs: the same engine drives the agent, the tests and `agent bt replay`.
 //!
 //! Semantics (SPEC 1.2, agreeing with BehaviorTree.CPP): `AND`/`OR` are reactive
@@ -18,6 +19,7 @@ use crate::learning::{LearnParams, QTable, StateId};
 use flockstep_proto::MAX_COMMANDS;
 use rand::Rng;
 use rand_xoshiro::Xoshiro256PlusPlus;
+use std::sync::Arc;
 
 /// Index of a node in the flattened tree (pre-order: the root is 0).
 pub type NodeId = u32;
@@ -72,12 +74,29 @@ enum Op {
     Condition { leaf: LeafId },
 }
 
-#[derive(Debug, Clone)]
-struct Node {
+/// One node of a tree's shape: what it does and where its children are.
+#[derive(Debug, Clone, Copy)]
+struct NodeShape {
     op: Op,
     /// Children are `children[first..first + count]`.
     first: u32,
     count: u32,
+}
+
+/// What every copy of a tree shares (a UAV has one copy per trial): the nodes, their
+/// children and labels. Only the run-time state differs between copies, so the copies
+/// of one agent read the same shape, which stays in cache from one trial to the next.
+#[derive(Debug)]
+struct Shape {
+    nodes: Vec<NodeShape>,
+    children: Vec<NodeId>,
+    /// Node id -> source line and label, for traces and errors.
+    labels: Vec<(usize, String)>,
+}
+
+/// The run-time state of one node.
+#[derive(Debug, Clone, Copy, Default)]
+struct NodeState {
     /// The node returned RUNNING on its last tick and has not been halted since.
     running: bool,
     /// Memory child index, decorator counter, or action progress.
@@ -99,12 +118,11 @@ struct Lor {
 /// A behavior tree ready to tick, with its learning selectors' Q-tables and RNG.
 #[derive(Debug, Clone)]
 pub struct Tree {
-    nodes: Vec<Node>,
-    children: Vec<NodeId>,
+    shape: Arc<Shape>,
+    /// Run-time state by node id.
+    state: Vec<NodeState>,
     /// Parallel nodes: per child slot, 0 = not finished, 1 = SUCCESS, 2 = FAILURE.
     finished: Vec<u8>,
-    /// Node id -> source line and label, for traces and errors.
-    labels: Vec<(usize, String)>,
     lors: Vec<Lor>,
     params: LearnParams,
     rng: Xoshiro256PlusPlus,
@@ -126,60 +144,37 @@ impl Tree {
                 limit: MAX_COMMANDS,
             });
         }
-        let mut tree = Tree {
-            nodes: Vec::new(),
-            children: Vec::new(),
-            finished: Vec::new(),
-            labels: Vec::new(),
-            lors: Vec::new(),
-            params,
-            rng,
-        };
-        tree.flatten(&spec.root);
-        tree.finished = vec![0; tree.children.len()];
-        Ok(tree)
+        let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
+        shape.flatten(&spec.root, &mut 0);
+        Ok(Tree::with_shape(Arc::new(shape), params, rng))
     }
 
-    /// Pre-order flattening; children of a node get contiguous slots in `children`.
-    fn flatten(&mut self, spec: &NodeSpec) -> NodeId {
-        let id = self.nodes.len() as NodeId;
-        let op = match &spec.kind {
-            NodeKind::Sequence { memory: false } => Op::Sequence,
-            NodeKind::Sequence { memory: true } => Op::SequenceMemory,
-            NodeKind::Fallback { memory: false } => Op::Fallback,
-            NodeKind::Fallback { memory: true } => Op::FallbackMemory,
-            NodeKind::Learning => {
-                self.lors.push(Lor {
-                    table: QTable::new(spec.children.len()),
-                    running_child: None,
-                    pending: None,
-                    tried: vec![false; spec.children.len()],
-                });
-                Op::Learning { lor: self.lors.len() as u32 - 1 }
-            }
-            NodeKind::Parallel { success_threshold } => {
-                Op::Parallel { success_threshold: *success_threshold as u32 }
-            }
-            NodeKind::Inverter => Op::Inverter,
-            NodeKind::ForceSuccess => Op::ForceSuccess,
-            NodeKind::ForceFailure => Op::ForceFailure,
-            NodeKind::Repeat { times } => Op::Repeat { times: *times },
-            NodeKind::Retry { attempts } => Op::Retry { attempts: *attempts },
-            NodeKind::Action { leaf, .. } => Op::Action { leaf: *leaf },
-            NodeKind::Condition { leaf, .. } => Op::Condition { leaf: *leaf },
-        };
-        self.nodes.push(Node { op, first: 0, count: 0, running: false, memory: 0 });
-        self.labels.push((spec.line, label(&spec.kind)));
-        let first = self.children.len();
-        self.children.extend(std::iter::repeat_n(0, spec.children.len()));
-        for (i, child) in spec.children.iter().enumerate() {
-            let child_id = self.flatten(child);
-            self.children[first + i] = child_id;
+    /// A new, untrained copy of this tree with its own RNG, sharing the shape.
+    pub fn fresh(&self, rng: Xoshiro256PlusPlus) -> Tree {
+        Tree::with_shape(self.shape.clone(), self.params, rng)
+    }
+
+    fn with_shape(shape: Arc<Shape>, params: LearnParams, rng: Xoshiro256PlusPlus) -> Tree {
+        // Learning selectors are numbered in pre-order, the order of the nodes.
+        let lors = shape
+            .nodes
+            .iter()
+            .filter(|node| matches!(node.op, Op::Learning { .. }))
+            .map(|node| Lor {
+                table: QTable::new(node.count as usize),
+                running_child: None,
+                pending: None,
+                tried: vec![false; node.count as usize],
+            })
+            .collect();
+        Tree {
+            state: vec![NodeState::default(); shape.nodes.len()],
+            finished: vec![0; shape.children.len()],
+            shape,
+            lors,
+            params,
+            rng,
         }
-        let node = &mut self.nodes[id as usize];
-        node.first = first as u32;
-        node.count = spec.children.len() as u32;
-        id
     }
 
     /// Ticks the tree once from the root.
@@ -253,25 +248,25 @@ impl Tree {
 
     /// Source line and label (`A-rotate`, `PAR m=2`...) of a node.
     pub fn label(&self, node: NodeId) -> (usize, &str) {
-        let (line, label) = &self.labels[node as usize];
+        let (line, label) = &self.shape.labels[node as usize];
         (*line, label)
     }
 
     pub fn is_leaf(&self, node: NodeId) -> bool {
-        matches!(self.nodes[node as usize].op, Op::Action { .. } | Op::Condition { .. })
+        matches!(self.shape.nodes[node as usize].op, Op::Action { .. } | Op::Condition { .. })
     }
 
     pub fn node_count(&self) -> usize {
-        self.nodes.len()
+        self.shape.nodes.len()
     }
 
     #[inline]
     fn child(&self, node: NodeId, i: u32) -> NodeId {
-        self.children[(self.nodes[node as usize].first + i) as usize]
+        self.shape.children[(self.shape.nodes[node as usize].first + i) as usize]
     }
 
     fn tick_node(&mut self, id: NodeId, ctx: &mut impl TickContext) -> Status {
-        let node = &self.nodes[id as usize];
+        let node = self.shape.nodes[id as usize];
         let status = match node.op {
             Op::Condition { leaf } => {
                 if ctx.check_condition(leaf) {
@@ -281,9 +276,9 @@ impl Tree {
                 }
             }
             Op::Action { leaf } => {
-                let mut progress = node.memory;
+                let mut progress = self.state[id as usize].memory;
                 let status = ctx.tick_action(leaf, &mut progress);
-                self.nodes[id as usize].memory = progress;
+                self.state[id as usize].memory = progress;
                 status
             }
             Op::Sequence => self.tick_reactive(id, Status::Success, ctx),
@@ -308,7 +303,7 @@ impl Tree {
             Op::Repeat { times } => self.tick_loop(id, times, Status::Success, ctx),
             Op::Retry { attempts } => self.tick_loop(id, attempts, Status::Failure, ctx),
         };
-        self.nodes[id as usize].running = status == Status::Running;
+        self.state[id as usize].running = status == Status::Running;
         ctx.trace(TraceEvent::Ticked { node: id, status });
         status
     }
@@ -317,7 +312,7 @@ impl Tree {
     /// every tick; the first child not returning `go_on` decides, and every later child that
     /// was still RUNNING from an earlier tick is halted (it is no longer reached).
     fn tick_reactive(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
-        let count = self.nodes[id as usize].count;
+        let count = self.shape.nodes[id as usize].count;
         for i in 0..count {
             let status = self.tick_node(self.child(id, i), ctx);
             if status != go_on {
@@ -331,21 +326,21 @@ impl Tree {
     /// `AND*` / `OR*`: resume at the child that was RUNNING; forget it once the node
     /// returns SUCCESS or FAILURE.
     fn tick_memory(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
-        let count = self.nodes[id as usize].count;
-        let mut i = self.nodes[id as usize].memory;
+        let count = self.shape.nodes[id as usize].count;
+        let mut i = self.state[id as usize].memory;
         while i < count {
             let status = self.tick_node(self.child(id, i), ctx);
             if status == Status::Running {
-                self.nodes[id as usize].memory = i;
+                self.state[id as usize].memory = i;
                 return Status::Running;
             }
             if status != go_on {
-                self.nodes[id as usize].memory = 0;
+                self.state[id as usize].memory = 0;
                 return status;
             }
             i += 1;
         }
-        self.nodes[id as usize].memory = 0;
+        self.state[id as usize].memory = 0;
         go_on
     }
 
@@ -353,7 +348,8 @@ impl Tree {
     /// M succeeded, FAILURE as soon as n-M+1 failed (success is then impossible); either way
     /// the still-running children are halted and the results forgotten.
     fn tick_parallel(&mut self, id: NodeId, threshold: u32, ctx: &mut impl TickContext) -> Status {
-        let (first, count) = (self.nodes[id as usize].first, self.nodes[id as usize].count);
+        let (first, count) =
+            (self.shape.nodes[id as usize].first, self.shape.nodes[id as usize].count);
         let slots = first as usize..(first + count) as usize;
         let mut successes = self.finished[slots.clone()].iter().filter(|&&f| f == 1).count() as u32;
         let mut failures = self.finished[slots.clone()].iter().filter(|&&f| f == 2).count() as u32;
@@ -361,7 +357,7 @@ impl Tree {
             if self.finished[slot] != 0 {
                 continue;
             }
-            match self.tick_node(self.children[slot], ctx) {
+            match self.tick_node(self.shape.children[slot], ctx) {
                 Status::Success => {
                     self.finished[slot] = 1;
                     successes += 1;
@@ -405,15 +401,15 @@ impl Tree {
                 return Status::Running;
             }
             if status != go_on {
-                self.nodes[id as usize].memory = 0;
+                self.state[id as usize].memory = 0;
                 return status;
             }
-            let done = self.nodes[id as usize].memory + 1;
+            let done = self.state[id as usize].memory + 1;
             if done >= limit {
-                self.nodes[id as usize].memory = 0;
+                self.state[id as usize].memory = 0;
                 return go_on;
             }
-            self.nodes[id as usize].memory = done;
+            self.state[id as usize].memory = done;
         }
     }
 
@@ -435,7 +431,7 @@ impl Tree {
                 self.lors[lor].table.bootstrap(s, a as usize, state, &params);
             }
         }
-        let count = self.nodes[id as usize].count;
+        let count = self.shape.nodes[id as usize].count;
         let explore = params.epsilon > 0.0 && self.rng.random::<f64>() < params.epsilon;
         self.lors[lor].tried.fill(false);
         for remaining in (1..=count).rev() {
@@ -514,7 +510,7 @@ impl Tree {
 
     /// Halts children `from..` of `id` that are still RUNNING.
     fn halt_children_from(&mut self, id: NodeId, from: u32, ctx: &mut impl TickContext) {
-        let count = self.nodes[id as usize].count;
+        let count = self.shape.nodes[id as usize].count;
         for i in from..count {
             self.halt_node(self.child(id, i), ctx);
         }
@@ -522,15 +518,15 @@ impl Tree {
 
     /// Halts `id` if it is RUNNING: its running descendants first, then its own state.
     fn halt_node(&mut self, id: NodeId, ctx: &mut impl TickContext) {
-        if !self.nodes[id as usize].running {
+        if !self.state[id as usize].running {
             return;
         }
-        let node = &self.nodes[id as usize];
+        let node = self.shape.nodes[id as usize];
         match node.op {
             Op::Action { leaf } => {
-                let mut progress = node.memory;
+                let mut progress = self.state[id as usize].memory;
                 ctx.halt_action(leaf, &mut progress);
-                self.nodes[id as usize].memory = progress;
+                self.state[id as usize].memory = progress;
             }
             Op::Condition { .. } => {}
             Op::Parallel { .. } => {
@@ -544,12 +540,52 @@ impl Tree {
             }
             _ => self.halt_children_from(id, 0, ctx),
         }
-        let node = &mut self.nodes[id as usize];
-        node.running = false;
+        let state = &mut self.state[id as usize];
+        state.running = false;
         if !matches!(node.op, Op::Action { .. }) {
-            node.memory = 0;
+            state.memory = 0;
         }
         ctx.trace(TraceEvent::Halted { node: id });
+    }
+}
+
+impl Shape {
+    /// Pre-order flattening; children of a node get contiguous slots in `children`, and
+    /// learning selectors are numbered in pre-order (`lors` counts them).
+    fn flatten(&mut self, spec: &NodeSpec, lors: &mut u32) -> NodeId {
+        let id = self.nodes.len() as NodeId;
+        let op = match &spec.kind {
+            NodeKind::Sequence { memory: false } => Op::Sequence,
+            NodeKind::Sequence { memory: true } => Op::SequenceMemory,
+            NodeKind::Fallback { memory: false } => Op::Fallback,
+            NodeKind::Fallback { memory: true } => Op::FallbackMemory,
+            NodeKind::Learning => {
+                *lors += 1;
+                Op::Learning { lor: *lors - 1 }
+            }
+            NodeKind::Parallel { success_threshold } => {
+                Op::Parallel { success_threshold: *success_threshold as u32 }
+            }
+            NodeKind::Inverter => Op::Inverter,
+            NodeKind::ForceSuccess => Op::ForceSuccess,
+            NodeKind::ForceFailure => Op::ForceFailure,
+            NodeKind::Repeat { times } => Op::Repeat { times: *times },
+            NodeKind::Retry { attempts } => Op::Retry { attempts: *attempts },
+            NodeKind::Action { leaf, .. } => Op::Action { leaf: *leaf },
+            NodeKind::Condition { leaf, .. } => Op::Condition { leaf: *leaf },
+        };
+        self.nodes.push(NodeShape { op, first: 0, count: 0 });
+        self.labels.push((spec.line, label(&spec.kind)));
+        let first = self.children.len();
+        self.children.extend(std::iter::repeat_n(0, spec.children.len()));
+        for (i, child) in spec.children.iter().enumerate() {
+            let child_id = self.flatten(child, lors);
+            self.children[first + i] = child_id;
+        }
+        let node = &mut self.nodes[id as usize];
+        node.first = first as u32;
+        node.count = spec.children.len() as u32;
+        id
     }
 }
 
