@@ -14,7 +14,8 @@ use crate::learning::{LearnParams, StateId};
 use crate::state::StateSpace;
 use crate::uav::Body;
 use flockstep_proto::{
-    seed, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation, MAX_TRIALS,
+    seed, slots_in, Action, FieldError, Observation, Phase, Pose, TrialAction, TrialObservation,
+    MAX_TRIALS,
 };
 use flockstep_world::scenario::Scenario;
 use rand::SeedableRng;
@@ -183,7 +184,7 @@ impl TrialAgent {
     /// What was heard from a peer that no longer takes part in this trial is void.
     fn forget_departed(&mut self, obs: TrialObservation<'_>, live: u64) {
         let peers = obs.header.members & live & !(1 << self.slot);
-        for peer in bits(self.peers & !peers) {
+        for peer in slots_in(self.peers & !peers) {
             self.comm.forget(peer);
         }
         self.peers = peers;
@@ -191,7 +192,7 @@ impl TrialAgent {
 
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
     fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
-        for peer in bits(obs.header.members & live & !(1 << self.slot)) {
+        for peer in slots_in(obs.header.members & live & !(1 << self.slot)) {
             if let Some(view) = obs.agents.get(peer) {
                 self.comm.hear(peer, &view.flags)?;
             }
@@ -270,17 +271,6 @@ impl TrialAgent {
     pub fn set_states(&mut self, states: StateSpace) {
         self.states = states;
     }
-}
-
-/// The indices of the bits set in `mask`, lowest first.
-fn bits(mut mask: u64) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (mask != 0).then(|| {
-            let bit = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            bit
-        })
-    })
 }
 
 /// One UAV agent: one [`TrialAgent`] per trial.

@@ -15,3 +15,30 @@ pub const MAX_TARGETS: usize = 64;
 /// Largest number of waypoints of one route (waypoint indices are `u16`; the agent's
 /// communication state packs two bits per peer waypoint).
 pub const MAX_WAYPOINTS: usize = 1024;
+
+/// The agent slots set in `mask` (a live set or a trial's members), lowest first: as many
+/// steps as slots, not `MAX_AGENTS`, since episode reports and observations are walked
+/// this way on every round.
+#[inline]
+pub fn slots_in(mut mask: u64) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let slot = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            slot
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slots_in_lists_the_set_bits_lowest_first() {
+        assert_eq!(slots_in(0).count(), 0);
+        assert_eq!(slots_in(0b1010_0001).collect::<Vec<_>>(), [0, 5, 7]);
+        assert_eq!(slots_in(1 << 63).collect::<Vec<_>>(), [63]);
+        assert_eq!(slots_in(u64::MAX).collect::<Vec<_>>(), (0..MAX_AGENTS).collect::<Vec<_>>());
+    }
+}

@@ -43,8 +43,7 @@ impl Recorder {
 
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
         self.collector.record(report)?;
-        let duration = (0..flockstep_proto::MAX_AGENTS)
-            .filter(|&slot| report.members & (1 << slot) != 0)
+        let duration = flockstep_proto::slots_in(report.members)
             .map(|slot| u64::from(report.lengths[slot]))
             .max()
             .unwrap_or(0);

@@ -6,7 +6,7 @@
 //! 1 (UAV1), trials and episodes from 0.
 
 use anyhow::{Context, Result};
-use flockstep_proto::{EpisodeReport, Phase, MAX_AGENTS};
+use flockstep_proto::{slots_in, EpisodeReport, Phase};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -44,6 +44,20 @@ impl EvalPlan {
     fn block_of(&self, index: u64) -> Option<usize> {
         (index < self.blocks * self.block).then(|| (index / self.block) as usize)
     }
+}
+
+/// Writes one CSV line of whole numbers. The supervisor writes a line per agent and
+/// episode while the run goes on, on the same two cores as the barrier, so the numbers are
+/// formatted by `itoa` rather than through `fmt`.
+fn write_csv_line(csv: &mut impl Write, fields: [u64; 6]) -> std::io::Result<()> {
+    let mut digits = itoa::Buffer::new();
+    for (i, field) in fields.into_iter().enumerate() {
+        if i > 0 {
+            csv.write_all(b",")?;
+        }
+        csv.write_all(digits.format(field).as_bytes())?;
+    }
+    csv.write_all(b"\n")
 }
 
 /// Greedy totals of one periodic block: (episodes, total length, truncated).
@@ -99,13 +113,12 @@ impl Collector {
         }
         let phase = Phase::from_u8(report.phase)
             .with_context(|| format!("episode report with phase {}", report.phase))?;
-        let end = (0..MAX_AGENTS)
-            .filter(|&slot| report.members & (1 << slot) != 0)
+        let end = slots_in(report.members)
             .map(|slot| report.start_tick + u64::from(report.lengths[slot]))
             .max()
             .unwrap_or(report.start_tick);
         self.ticks[trial] = self.ticks[trial].max(end);
-        for slot in (0..MAX_AGENTS).filter(|&slot| report.members & (1 << slot) != 0) {
+        for slot in slots_in(report.members) {
             if slot >= self.train.len() {
                 self.grow(slot + 1);
             }
@@ -115,15 +128,16 @@ impl Collector {
                 Phase::Train => &mut self.episodes_csv,
                 Phase::Eval => &mut self.greedy_csv,
             };
-            writeln!(
+            write_csv_line(
                 csv,
-                "{},{},{},{},{},{}",
-                trial,
-                slot + 1,
-                report.episode,
-                report.start_tick,
-                length,
-                truncated
+                [
+                    report.trial.into(),
+                    slot as u64 + 1,
+                    report.episode,
+                    report.start_tick,
+                    length.into(),
+                    truncated,
+                ],
             )?;
             match phase {
                 Phase::Train => {
