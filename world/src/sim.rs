@@ -14,8 +14,8 @@
 
 use crate::scenario::Scenario;
 use flockstep_proto::{
-    seed, Action, AgentView, EpisodeReport, FieldError, Flags, Observation, ObservationKind, Phase,
-    Pose, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
+    seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Flags, Observation,
+    ObservationKind, Phase, Pose, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
 };
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -36,6 +36,16 @@ pub struct EpisodeConfig {
     pub tick_cap: u32,
 }
 
+/// The ground truth of one agent slot in one trial.
+#[derive(Debug, Clone, Copy)]
+struct SlotTruth {
+    pose: Pose,
+    /// The episode length if it finished, else 0.
+    finished_at: u32,
+    /// The flags it sent in the last tick, relayed in the next observation.
+    flags: Flags,
+}
+
 /// The ground truth of one trial.
 #[derive(Debug, Clone)]
 pub struct TrialWorld {
@@ -48,11 +58,8 @@ pub struct TrialWorld {
     members: u64,
     /// Agent slots admitted to the run that join at the next episode start.
     joining: u64,
-    poses: Vec<Pose>,
-    /// Per slot: the episode length if it finished, else 0.
-    finished_at: Vec<u32>,
-    /// Per slot: the flags it sent in the last tick, relayed in the next observation.
-    flags: Vec<Flags>,
+    /// Per agent slot, side by side: a tick reads and writes each slot's fields together.
+    slots: Vec<SlotTruth>,
     phase: Phase,
     /// Training episodes finished.
     trained: u64,
@@ -87,9 +94,14 @@ impl TrialWorld {
             eval_rng: rng(seed::WORLD_EVAL),
             members,
             joining: 0,
-            poses: vec![scenario.start_pose(); slots],
-            finished_at: vec![0; slots],
-            flags: vec![Flags::default(); slots],
+            slots: vec![
+                SlotTruth {
+                    pose: scenario.start_pose(),
+                    finished_at: 0,
+                    flags: Flags::default()
+                };
+                slots
+            ],
             phase: Phase::Train,
             trained: 0,
             evaluated: 0,
@@ -161,8 +173,10 @@ impl TrialWorld {
         self.members |= self.joining;
         self.joining = 0;
         let start = self.scenario.start_pose();
-        self.poses.fill(start);
-        self.finished_at.fill(0);
+        for slot in &mut self.slots {
+            slot.pose = start;
+            slot.finished_at = 0;
+        }
         self.episode_tick = 0;
         self.episode_start = self.tick;
         let n_targets = self.scenario.n_targets();
@@ -181,17 +195,17 @@ impl TrialWorld {
         out.done = self.done as u8;
         out.phase = self.phase as u8;
         out.members = self.members;
-        for (slot, view) in views.iter_mut().enumerate() {
+        for (slot, (view, truth)) in views.iter_mut().zip(&self.slots).enumerate() {
             if self.members & (1 << slot) == 0 {
                 *view = Default::default();
                 continue;
             }
-            let pose = self.poses[slot];
-            view.pose = pose;
-            view.sees_target = (self.scenario.visible_targets(slot, pose) >> self.target & 1) as u8;
-            view.finished = (self.finished_at[slot] != 0) as u8;
+            view.pose = truth.pose;
+            view.sees_target =
+                (self.scenario.visible_targets(slot, truth.pose) >> self.target & 1) as u8;
+            view.finished = (truth.finished_at != 0) as u8;
             view.member = 1;
-            view.flags = self.flags[slot];
+            view.flags = truth.flags;
         }
     }
 
@@ -224,16 +238,17 @@ impl TrialWorld {
         if self.done || self.members & (1 << slot) == 0 {
             return;
         }
-        self.flags[slot] = action.flags;
-        if self.finished_at[slot] != 0 {
+        let route_len = self.scenario.route_len(slot);
+        let truth = &mut self.slots[slot];
+        truth.flags = action.flags;
+        if truth.finished_at != 0 {
             return; // hovering: only its flags count
         }
-        let route_len = self.scenario.route_len(slot);
         for command in action.commands() {
-            self.poses[slot] = self.poses[slot].apply(command, route_len);
+            truth.pose = truth.pose.apply(command, route_len);
         }
         if action.ended == 1 {
-            self.finished_at[slot] = self.episode_tick + 1;
+            truth.finished_at = self.episode_tick + 1;
         }
     }
 
@@ -245,9 +260,8 @@ impl TrialWorld {
         }
         self.tick += 1;
         self.episode_tick += 1;
-        let everyone_finished = (0..self.poses.len())
-            .filter(|&slot| self.members & (1 << slot) != 0)
-            .all(|slot| self.finished_at[slot] != 0);
+        let everyone_finished =
+            slots_in(self.members).all(|slot| self.slots[slot].finished_at != 0);
         if !everyone_finished && self.episode_tick < self.config.tick_cap {
             return None;
         }
@@ -260,8 +274,8 @@ impl TrialWorld {
             members: self.members,
             ..EpisodeReport::default()
         };
-        for slot in (0..self.poses.len()).filter(|&slot| self.members & (1 << slot) != 0) {
-            let finished = self.finished_at[slot];
+        for slot in slots_in(self.members) {
+            let finished = self.slots[slot].finished_at;
             report.lengths[slot] = if finished != 0 { finished } else { self.episode_tick };
             if finished == 0 {
                 report.truncated |= 1 << slot;
