@@ -175,8 +175,9 @@ pub struct RunArgs {
     #[arg(long, value_enum, default_value_t = Restart::Never)]
     pub restart: Restart,
     /// Agents save their Q-tables every N training episodes of a trial (shm; 0: only at
-    /// the end). Restarts resume from these.
-    #[arg(long, default_value_t = 1000)]
+    /// the end). Restarts resume from these. The barrier waits while an agent writes one
+    /// (about 0.3 ms for s3): 10 000 episodes are about 0.7 s of a 4-trial s3 run.
+    #[arg(long, default_value_t = 10_000)]
     pub snapshot_every: u64,
     /// Test aid (shm only), off by default: `N=SPEC` makes agent N misbehave; SPEC is
     /// `crash-at-round=R`, `hang-at-round=R` or `ignore-sigterm`.
