@@ -1,0 +1,114 @@
+//! The work of one barrier round without any transport: the world's observation, every
+//! agent's `act`, the world's checks and steps, its episode reports. `throughput` measures
+//! the product over shared memory, where each agent shares its core with another process;
+//! this bench isolates the part that grows with the trials, which decides how far 4 trials
+//! per round outrun 1 (`docs/TRANSPORT.md`, "Where a round goes").
+//!
+//! `cargo bench --bench round` times a round of s3 (2 UAVs, `flags`) at 1 and 4 trials,
+//! after 300 000 rounds of training so that tables and episode lengths are those of a run in
+//! progress:
+//! - `warm`: rounds back to back, everything in cache (the in-process runner's case);
+//! - `cold`: 4 MiB of unrelated memory written before each round (more than this machine's
+//!   L2 of 1 MiB per core), only the round timed. In the barrier every process runs after
+//!   another one on its core, so its data has left L2: the cold figure is the one the
+//!   multi-process run pays. (Round minus one-trial round) / 3 is the cost of a trial.
+
+use clap::Parser;
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use flockstep_agents::agent::UavAgent;
+use flockstep_proto::{Action, EpisodeReport, Observation};
+use flockstep_supervisor::cli::Cli;
+use flockstep_supervisor::config::RunConfig;
+use flockstep_world::sim::World;
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+/// Rounds run before measuring: about 20 000 episodes of s3 per trial.
+const TRAINING_ROUNDS: u64 = 300_000;
+/// Memory written before each cold round; larger than one core's L2.
+const EVICTION_BYTES: usize = 4 << 20;
+
+/// A world and its agents in one process, as the in-process runner drives them.
+struct Round {
+    world: World,
+    agents: Vec<UavAgent>,
+    observation: Box<Observation>,
+    actions: Vec<Action>,
+    reports: Vec<EpisodeReport>,
+}
+
+impl Round {
+    /// The main job's configuration (s3, 2 UAVs, seed 7) with `trials` trials, trained for
+    /// [`TRAINING_ROUNDS`].
+    fn trained(trials: usize) -> Round {
+        let args = format!("supervisor --uavs 2 --trials {trials} --seed 7 --eval-episodes 0");
+        let cli = Cli::parse_from(args.split(' '));
+        let mut config = RunConfig::resolve(&cli.run).expect("the main job's configuration");
+        config.episodes.train_episodes = u64::MAX;
+        let world = World::new(config.scenario.clone(), 2, trials, 7, config.episodes)
+            .expect("a world of s3");
+        let agents = (0..2)
+            .map(|slot| UavAgent::new(&config.agent_spec(slot)).expect("an agent of s3"))
+            .collect();
+        let mut round = Round {
+            world,
+            agents,
+            observation: Box::default(),
+            actions: (0..2).map(Action::new).collect(),
+            reports: Vec::new(),
+        };
+        for _ in 0..TRAINING_ROUNDS {
+            round.step();
+        }
+        round
+    }
+
+    /// One barrier round.
+    fn step(&mut self) {
+        self.world.observe(&mut self.observation);
+        for (agent, action) in self.agents.iter_mut().zip(&mut self.actions) {
+            agent.act(&self.observation, action).expect("a well-formed observation");
+        }
+        for action in &self.actions {
+            self.world.apply(action).expect("a well-formed action");
+        }
+        self.world.end_round(&mut self.reports);
+        black_box(&self.reports);
+        self.reports.clear();
+    }
+}
+
+/// Writes one byte in every cache line of `memory`.
+fn evict(memory: &mut [u8]) {
+    for line in memory.chunks_exact_mut(64) {
+        line[0] = line[0].wrapping_add(1);
+    }
+    black_box(memory);
+}
+
+fn rounds(c: &mut Criterion) {
+    let mut group = c.benchmark_group("round");
+    let mut eviction = vec![0u8; EVICTION_BYTES];
+    for trials in [1, 4] {
+        let mut round = Round::trained(trials);
+        group.bench_function(BenchmarkId::new("warm", format!("trials={trials}")), |b| {
+            b.iter(|| round.step())
+        });
+        group.bench_function(BenchmarkId::new("cold", format!("trials={trials}")), |b| {
+            b.iter_custom(|iters| {
+                let mut timed = Duration::ZERO;
+                for _ in 0..iters {
+                    evict(&mut eviction);
+                    let start = Instant::now();
+                    round.step();
+                    timed += start.elapsed();
+                }
+                timed
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, rounds);
+criterion_main!(benches);
