@@ -135,10 +135,18 @@ impl RunConfig {
 /// system's `iceoryx2.toml` cannot change a run) with the run's own file prefix.
 pub fn iceoryx_config(run_id: &str) -> Result<Config, TransportError> {
     services::validate_run_id(run_id).map_err(TransportError::InvalidRunId)?;
-    let mut config = Config::default();
+    let mut config = default_config();
     config.global.prefix = FileName::new(run_prefix(run_id).as_bytes())
         .map_err(|e| TransportError::InvalidRunId(format!("run id `{run_id}`: {e:?}")))?;
     Ok(config)
+}
+
+/// iceoryx2's default configuration, with its log level at errors. Our configuration does
+/// not come from a file, but iceoryx2 looks one up (on the first use of its global
+/// configuration, and when it cleans a dead node without details) and warns on stderr.
+fn default_config() -> Config {
+    set_log_level(LogLevel::Error);
+    Config::default()
 }
 
 fn run_prefix(run_id: &str) -> String {
@@ -158,9 +166,6 @@ impl RunNode {
     /// removes the resources of dead nodes of the same run.
     pub fn new(run: &RunConfig) -> Result<RunNode, TransportError> {
         let config = iceoryx_config(&run.run_id)?;
-        // Our config does not come from a file, but iceoryx2 still looks one up when it cleans
-        // a dead node without details, and warns on stderr; errors are what we want to see.
-        set_log_level(LogLevel::Error);
         if run.signals == SignalMode::Supervised {
             install_supervised_signals()?;
         }

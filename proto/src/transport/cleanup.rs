@@ -146,7 +146,7 @@ pub fn leftover_files(run_id: &str) -> Result<Vec<PathBuf>, TransportError> {
 
 /// `/dev/shm` and the iceoryx2 root with its node and service directories.
 fn candidate_dirs() -> Vec<PathBuf> {
-    let global = Config::default().global;
+    let global = super::default_config().global;
     let path = |p: &iceoryx2::prelude::Path| {
         PathBuf::from(String::from_utf8_lossy(p.as_bytes()).into_owned())
     };
