@@ -54,8 +54,9 @@ pub struct LearnerArgs {
     /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
-    /// Test aid, off by default, comma-separated: `crash-at-round=N` (abort),
-    /// `hang-at-round=N` (stop answering, still obey SIGTERM), `ignore-sigterm`.
+    /// Test aid, off by default, comma-separated: `crash-before-join` (abort before asking
+    /// to join), `crash-at-round=N` (abort), `hang-at-round=N` (stop answering, still obey
+    /// SIGTERM), `ignore-sigterm`.
     #[arg(long)]
     pub fault: Option<String>,
 }
@@ -104,6 +105,7 @@ pub struct AttachArgs {
 /// A test aid that makes the agent misbehave on purpose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Fault {
+    CrashBeforeJoin,
     CrashAtRound(u64),
     HangAtRound(u64),
     IgnoreSigterm,
@@ -118,10 +120,12 @@ fn parse_fault(spec: &str) -> Result<Fault> {
     match spec.split_once('=') {
         Some(("crash-at-round", n)) => Ok(Fault::CrashAtRound(round(n)?)),
         Some(("hang-at-round", n)) => Ok(Fault::HangAtRound(round(n)?)),
+        None if spec == "crash-before-join" => Ok(Fault::CrashBeforeJoin),
         None if spec == "ignore-sigterm" => Ok(Fault::IgnoreSigterm),
-        _ => {
-            bail!("--fault `{spec}`: expected crash-at-round=N, hang-at-round=N or ignore-sigterm")
-        }
+        _ => bail!(
+            "--fault `{spec}`: expected crash-before-join, crash-at-round=N, hang-at-round=N or \
+             ignore-sigterm"
+        ),
     }
 }
 
@@ -180,6 +184,9 @@ fn serve(
         unsafe {
             libc::signal(libc::SIGTERM, libc::SIG_IGN);
         }
+    }
+    if faults.contains(&Fault::CrashBeforeJoin) {
+        std::process::abort();
     }
     let request = JoinRequest {
         nonce: join_nonce(),

@@ -94,7 +94,8 @@ impl Fleet<'_> {
         recorder: &mut Recorder,
         stop: &AtomicBool,
     ) -> Result<Outcome> {
-        let mut stop_sent = false;
+        // Everything told to the world so far; each message repeats it all.
+        let mut control = Control::default();
         let mut notes = Vec::new();
         let mut reported = vec![false; self.processes.len()];
         loop {
@@ -102,9 +103,9 @@ impl Fleet<'_> {
                 recorder.record(&report)?;
             }
             recorder.redraw();
-            if stop.load(Ordering::Relaxed) && !stop_sent {
-                ports.send_control(&Control { stop: 1, ..Control::default() })?;
-                stop_sent = true;
+            if stop.load(Ordering::Relaxed) && control.stop == 0 {
+                control.stop = 1;
+                ports.send_control(&control)?;
             }
             if let Some(status) = self.processes[0].status()? {
                 while let Some(report) = ports.try_episode()? {
@@ -116,7 +117,7 @@ impl Fleet<'_> {
                         self.processes[0].last_words()
                     );
                 }
-                return Ok(Outcome { complete: !stop_sent, notes, peak_rss_kib: vec![] });
+                return Ok(Outcome { complete: control.stop == 0, notes, peak_rss_kib: vec![] });
             }
             reported.resize(self.processes.len(), false);
             let mut failed = Vec::new();
@@ -135,12 +136,15 @@ impl Fleet<'_> {
                 notes.push(note);
                 let slot = slot.expect("agent processes serve a slot");
                 if self.config.restart == Restart::OnFailure
-                    && !stop_sent
+                    && control.stop == 0
                     && self.restarts[slot] < MAX_RESTARTS
                 {
                     self.restarts[slot] += 1;
                     self.spawn_agent(slot, true)?;
                     notes.push(format!("UAV{} restarted from its latest snapshot", slot + 1));
+                } else {
+                    control.gone |= 1 << slot;
+                    ports.send_control(&control)?;
                 }
             }
             // Sleeps rather than polls: waking up for each record made the supervisor yield

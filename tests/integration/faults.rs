@@ -129,6 +129,31 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
     }
 }
 
+/// Before it asks to join, only the supervisor can tell that an agent died: the world must
+/// not wait for it until its start-up timeout (30 s) and then fail the run.
+#[test]
+fn an_agent_that_dies_before_joining_does_not_hold_up_the_run() {
+    let dir = scratch();
+    let (id, out) = (run_id("prejoin"), dir.path().display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 500 --trials 1 --seed 52 --fault 2=crash-before-join"),
+    ));
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let log =
+        String::from_utf8(read(&dir.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    assert!(log.contains("its process ended before it asked to join uav=2"), "{log}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], true, "{s:#}");
+    assert!(s["notes"].to_string().contains("UAV2 failed"), "the loss is not reported: {s:#}");
+    let rows = episode_rows(dir.path());
+    assert_eq!(rows.iter().filter(|r| r[1] == 1).count(), 500, "UAV1 did not finish its budget");
+    assert_eq!(rows.iter().filter(|r| r[1] == 2).count(), 0, "UAV2 never flew");
+    assert_nothing_left(&id);
+}
+
 #[test]
 fn a_restarted_agent_goes_on_from_its_snapshot() {
     let dir = scratch();

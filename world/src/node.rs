@@ -15,7 +15,7 @@ use clap::Parser;
 use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SignalMode, TransportError, WorldPorts,
 };
-use flockstep_proto::{JoinRequest, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
+use flockstep_proto::{slots_in, JoinRequest, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -107,8 +107,8 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         members: Members::default(),
         agent_timeout: Duration::from_millis(args.agent_timeout_ms),
     };
-    node.await_starting_agents(args.uavs, startup)?;
-    node.barrier()
+    let stop_requested = node.await_starting_agents(args.uavs, startup)?;
+    node.barrier(stop_requested)
 }
 
 fn run_info(args: &WorldArgs) -> Result<RunInfo> {
@@ -156,9 +156,13 @@ struct WorldNode {
 }
 
 impl WorldNode {
-    /// Waits until the agents the supervisor starts (slots 0..uavs) have asked to join.
-    fn await_starting_agents(&mut self, uavs: usize, timeout: Duration) -> Result<()> {
+    /// Waits until each agent the supervisor starts (slots 0..uavs) has asked to join, or
+    /// the supervisor says its process ended before it did: the run goes on without those,
+    /// and their routes stay free for agents that attach. Returns whether the supervisor
+    /// asked to stop meanwhile.
+    fn await_starting_agents(&mut self, uavs: usize, timeout: Duration) -> Result<bool> {
         let Self { ports, members, .. } = self;
+        let (mut gone, mut stop) = (0u64, false);
         ports.waiter().wait(
             &format_args!("the join requests of the {uavs} starting agents"),
             timeout,
@@ -175,10 +179,22 @@ impl WorldNode {
                         members.waiting.push(request);
                     }
                 }
-                Ok(members.owners[..uavs].iter().all(|&n| n != 0).then_some(()))
+                while let Some(control) = ports.try_control()? {
+                    gone |= control.gone;
+                    stop |= control.stop == 1;
+                }
+                let settled = |slot: usize| members.owners[slot] != 0 || gone & (1 << slot) != 0;
+                Ok((0..uavs).all(settled).then_some(()))
             },
         )?;
-        Ok(())
+        for slot in (0..uavs).filter(|&slot| self.members.owners[slot] == 0) {
+            tracing::warn!(uav = slot + 1, "its process ended before it asked to join");
+            self.world.remove(slot);
+        }
+        if self.world.live() == 0 {
+            bail!("every starting agent ended before it asked to join: the run cannot go on");
+        }
+        Ok(stop)
     }
 
     /// Answers the join requests read so far: a free route (the one asked for if free) from
@@ -236,8 +252,9 @@ impl WorldNode {
         }
     }
 
-    /// Runs rounds until every trial is done or the supervisor asks to stop, then tells the
-    /// agents to stop and waits for each one's last answer (its snapshots are written then).
+    /// Runs rounds until every trial is done or the supervisor asks to stop (`stop_requested`:
+    /// it already has), then tells the agents to stop and waits for each one's last answer
+    /// (its snapshots are written then).
     ///
     /// Between publishing a round and the first answer the world has nothing to do, so what
     /// does not shape the round waits for then: the episode records of the round before, and
@@ -245,8 +262,8 @@ impl WorldNode {
     /// rare, and each look costs two reads of iceoryx2 queues, so the world looks once per
     /// [`LOOK_FOR_REQUESTS_EVERY`], not every round, and sends the records it queued then.
     /// Whatever ends the rounds, the queued records are sent: a failed run keeps them too.
-    fn barrier(&mut self) -> Result<()> {
-        let rounds = self.rounds();
+    fn barrier(&mut self, stop_requested: bool) -> Result<()> {
+        let rounds = self.rounds(stop_requested);
         // Unless a stalled supervisor is what failed: sending again would only wait again.
         let stalled = rounds
             .as_ref()
@@ -258,9 +275,8 @@ impl WorldNode {
         Ok(flushed?)
     }
 
-    fn rounds(&mut self) -> Result<()> {
+    fn rounds(&mut self, mut stop_requested: bool) -> Result<()> {
         let mut reports = Vec::new();
-        let mut stop_requested = false;
         let mut last_look = Instant::now();
         loop {
             self.admit_joiners()?;
@@ -306,7 +322,7 @@ impl WorldNode {
             if stopping {
                 return Ok(());
             }
-            for slot in slots(round.live & !answered.answered) {
+            for slot in slots_in(round.live & !answered.answered) {
                 let why = if answered.gone & (1 << slot) != 0 {
                     "its process is gone"
                 } else {
@@ -379,7 +395,7 @@ impl WorldNode {
                 }
                 let since = *slow_since.get_or_insert_with(Instant::now);
                 if since.elapsed() > DEATH_CHECK_AFTER {
-                    answers.gone = slots(missing)
+                    answers.gone = slots_in(missing)
                         .filter(|&s| !process_alive(members.pids[s]))
                         .fold(0, |m, s| m | 1 << s);
                     if answers.gone == missing {
@@ -421,11 +437,6 @@ const DEATH_CHECK_AFTER: Duration = Duration::from_millis(20);
 /// it for nothing but rare events. The world reads it for requests every this many rounds
 /// (about 0.1 ms at 2 UAVs, 1.6 ms at 32), and for dead agents only once its waiter blocks.
 const ROUNDS_BETWEEN_CLOCK_READS: u64 = 16;
-
-/// The slots whose bits are set in `mask`.
-fn slots(mask: u64) -> impl Iterator<Item = usize> {
-    (0..MAX_AGENTS).filter(move |s| mask & (1 << s) != 0)
-}
 
 /// Whether process `pid` exists and is not a zombie (a killed agent stays a zombie until
 /// the supervisor reaps it). Pid 0 (unknown) counts as alive: the deadline decides then.
