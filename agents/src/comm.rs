@@ -14,7 +14,6 @@
 //! leaves the run is forgotten. The packed words go straight into the state key.
 
 use flockstep_proto::{FieldError, Flags};
-use smallvec::SmallVec;
 
 /// Which communication the agents use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -52,71 +51,54 @@ const LOW: u64 = 1;
 /// `flags`: seen from there, target in view. `compact`: confirmed.
 const HIGH: u64 = 2;
 
-/// What one UAV keeps about one agent slot.
-#[derive(Debug, Clone, Copy, Default)]
-struct Peer {
-    /// `flags`: bit offset of its vector in `words` (`None` for the UAV itself).
-    offset: Option<usize>,
-    route_len: usize,
-    /// `compact`: the candidates it has reported (ruled out, confirmed).
-    heard: (u64, u64),
-}
-
-/// Communication words kept inline: up to 128 bits, as many as s3 and the generated maps
-/// of up to 8 candidates need, live in the state itself (more spill to the heap).
-type Words = SmallVec<[u64; 2]>;
-
 /// One UAV's communication state within one trial.
-///
-/// An agent reads it on every tick of every trial, so what a tick needs sits together: the
-/// per-slot entries in one vector, the words in the struct.
 #[derive(Debug, Clone)]
 pub struct CommState {
     mode: CommMode,
-    /// Per agent slot.
-    peers: Vec<Peer>,
+    /// `flags`: per agent slot, bit offset of its vector in `words` (`None` for itself).
+    offsets: Vec<Option<usize>>,
+    route_lens: Vec<usize>,
     /// `compact`: bits of the valid candidate cells.
     targets: u64,
+    /// `compact`: per slot, the candidates it has reported (ruled out, confirmed).
+    heard: Vec<(u64, u64)>,
     /// `compact`: this UAV's own findings in the episode, which it sends.
     own: (u64, u64),
-    words: Words,
+    words: Vec<u64>,
 }
 
 impl CommState {
     /// `route_lens[j]` is the route length of agent slot j; `me` is this UAV's slot;
     /// `targets` the number of candidate target cells.
     pub fn new(mode: CommMode, me: usize, route_lens: &[usize], targets: usize) -> CommState {
-        let mut peers: Vec<Peer> =
-            route_lens.iter().map(|&route_len| Peer { route_len, ..Peer::default() }).collect();
+        let mut offsets = vec![None; route_lens.len()];
         let bits = match mode {
             CommMode::None => 0,
             CommMode::Compact => 2 * targets,
             CommMode::Flags => {
                 let mut bits = 0;
-                for (slot, peer) in peers.iter_mut().enumerate() {
-                    if slot != me {
-                        peer.offset = Some(bits);
-                        bits += 2 * peer.route_len;
-                    }
+                for (slot, len) in route_lens.iter().enumerate().filter(|&(slot, _)| slot != me) {
+                    offsets[slot] = Some(bits);
+                    bits += 2 * len;
                 }
                 bits
             }
         };
         CommState {
             mode,
-            peers,
+            offsets,
+            route_lens: route_lens.to_vec(),
             targets: if targets >= 64 { u64::MAX } else { (1 << targets) - 1 },
+            heard: vec![(0, 0); route_lens.len()],
             own: (0, 0),
-            words: smallvec::smallvec![UNKNOWN; bits.div_ceil(64)],
+            words: vec![UNKNOWN; bits.div_ceil(64)],
         }
     }
 
     /// A new episode: everything is unknown again.
     pub fn reset(&mut self) {
         self.words.fill(UNKNOWN);
-        for peer in &mut self.peers {
-            peer.heard = (0, 0);
-        }
+        self.heard.fill((0, 0));
         self.own = (0, 0);
     }
 
@@ -125,15 +107,15 @@ impl CommState {
         match self.mode {
             CommMode::None => {}
             CommMode::Flags => {
-                if let Some(&Peer { offset: Some(offset), route_len, .. }) = self.peers.get(peer) {
-                    for k in 0..route_len {
+                if let Some(Some(offset)) = self.offsets.get(peer).copied() {
+                    for k in 0..self.route_lens[peer] {
                         self.set(offset + 2 * k, UNKNOWN);
                     }
                 }
             }
             CommMode::Compact => {
-                if let Some(entry) = self.peers.get_mut(peer) {
-                    entry.heard = (0, 0);
+                if let Some(heard) = self.heard.get_mut(peer) {
+                    *heard = (0, 0);
                     self.fuse();
                 }
             }
@@ -144,20 +126,17 @@ impl CommState {
     /// changed. Values out of range are refused (a rogue or buggy sender).
     #[inline]
     pub fn hear(&mut self, peer: usize, flags: &Flags) -> Result<bool, FieldError> {
-        let Some(&Peer { offset, route_len, heard }) = self.peers.get(peer) else {
-            return Ok(false);
-        };
-        if flags.valid == 0 {
+        if flags.valid == 0 || peer >= self.route_lens.len() {
             return Ok(false);
         }
         match self.mode {
             CommMode::None => Ok(false),
             CommMode::Flags => {
-                let Some(offset) = offset else { return Ok(false) };
+                let Some(offset) = self.offsets[peer] else { return Ok(false) };
                 flockstep_proto::check_below(
                     "flags.waypoint",
                     flags.waypoint.into(),
-                    route_len as u64,
+                    self.route_lens[peer] as u64,
                 )?;
                 flockstep_proto::check_below("flags.sees_target", flags.sees_target.into(), 2)?;
                 let value = if flags.sees_target == 1 { HIGH } else { LOW };
@@ -180,11 +159,12 @@ impl CommState {
                         });
                     }
                 }
+                let heard = &mut self.heard[peer];
                 let merged = (heard.0 | flags.ruled_out, heard.1 | flags.confirmed);
-                if merged == heard {
+                if merged == *heard {
                     return Ok(false);
                 }
-                self.peers[peer].heard = merged;
+                *heard = merged;
                 Ok(self.fuse())
             }
         }
@@ -220,7 +200,7 @@ impl CommState {
     /// `compact`: rewrites the words from what every peer reported; true if they changed.
     fn fuse(&mut self) -> bool {
         let (ruled, confirmed) =
-            self.peers.iter().fold((0, 0), |(r, c), peer| (r | peer.heard.0, c | peer.heard.1));
+            self.heard.iter().fold((0, 0), |(r, c), &(hr, hc)| (r | hr, c | hc));
         let before = self.words.clone();
         for k in 0..64usize.min(self.words.len() * 32) {
             let value = if confirmed >> k & 1 == 1 {
@@ -259,11 +239,10 @@ impl CommState {
         let bit = match self.mode {
             CommMode::None => return None,
             CommMode::Flags => {
-                let peer = self.peers.get(peer)?;
-                if k >= peer.route_len {
+                let offset = self.offsets.get(peer).copied().flatten()?;
+                if k >= self.route_lens[peer] {
                     return None;
                 }
-                let offset = peer.offset?;
                 offset + 2 * k
             }
             CommMode::Compact => {

@@ -52,33 +52,16 @@ impl LearnParams {
 /// The reward of every learning step (the thesis counts ticks).
 pub const STEP_REWARD: f64 = -1.0;
 
-/// Eight values aligned to a cache line: the row of a selector of up to eight children
-/// takes one line, where rows back to back would straddle two for every other state. A
-/// tick reads or writes two rows of each selector, and in the multi-process run they are
-/// rarely still in cache (`benches/round.rs`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[repr(C, align(64))]
-struct Line([f64; 8]);
-
-/// Values per [`Line`].
-const LINE: usize = 8;
-
 /// Q(s, a) for one learning selector with `n_actions` children.
-///
-/// A snapshot stores the values row by row without padding (`n_actions`, then `values`).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct QTable {
     n_actions: usize,
-    /// Lines per state row.
-    row_lines: usize,
-    /// State `s`'s row is `lines[s * row_lines..(s + 1) * row_lines]`; values past
-    /// `n_actions` stay zero.
-    lines: Vec<Line>,
+    values: Vec<f64>,
 }
 
 impl QTable {
     pub fn new(n_actions: usize) -> Self {
-        QTable { n_actions, row_lines: n_actions.div_ceil(LINE).max(1), lines: Vec::new() }
+        QTable { n_actions, values: Vec::new() }
     }
 
     pub fn n_actions(&self) -> usize {
@@ -87,46 +70,32 @@ impl QTable {
 
     /// Number of state rows stored (rows beyond it read as zero).
     pub fn n_rows(&self) -> usize {
-        self.lines.len() / self.row_lines
+        self.values.len() / self.n_actions.max(1)
     }
 
     #[inline]
     pub fn get(&self, state: StateId, action: usize) -> f64 {
-        let line = state as usize * self.row_lines + action / LINE;
-        self.lines.get(line).map_or(0.0, |line| line.0[action % LINE])
-    }
-
-    /// The values of `state`'s row, or None if it was never written.
-    #[inline]
-    fn stored_row(&self, state: StateId) -> Option<impl Iterator<Item = f64> + '_> {
-        let start = state as usize * self.row_lines;
-        let lines = self.lines.get(start..start + self.row_lines)?;
-        Some(lines.iter().flat_map(|line| line.0).take(self.n_actions))
+        self.values.get(state as usize * self.n_actions + action).copied().unwrap_or(0.0)
     }
 
     /// max_b Q(s, b).
     #[inline]
     pub fn max(&self, state: StateId) -> f64 {
-        match self.stored_row(state) {
-            Some(row) => row.fold(f64::NEG_INFINITY, f64::max),
+        let start = state as usize * self.n_actions;
+        match self.values.get(start..start + self.n_actions) {
+            Some(row) => row.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             None => 0.0,
         }
-    }
-
-    /// Q(s, a) to write, making room for the row if it was never written.
-    #[inline]
-    fn value_mut(&mut self, state: StateId, action: usize) -> &mut f64 {
-        let line = state as usize * self.row_lines + action / LINE;
-        if line >= self.lines.len() {
-            self.lines.resize((state as usize + 1) * self.row_lines, Line::default());
-        }
-        &mut self.lines[line].0[action % LINE]
     }
 
     /// One Q-learning step towards `target`: Q(s,a) += alpha * (target - Q(s,a)).
     #[inline]
     pub fn step(&mut self, state: StateId, action: usize, target: f64, alpha: f64) {
-        let q = self.value_mut(state, action);
+        let index = state as usize * self.n_actions + action;
+        if index >= self.values.len() {
+            self.values.resize((state as usize + 1) * self.n_actions, 0.0);
+        }
+        let q = &mut self.values[index];
         *q += alpha * (target - *q);
     }
 
@@ -146,65 +115,6 @@ impl QTable {
     /// The row of state `s` (zeros if never written).
     pub fn row(&self, state: StateId) -> Vec<f64> {
         (0..self.n_actions).map(|a| self.get(state, a)).collect()
-    }
-}
-
-impl Serialize for QTable {
-    /// As `{ n_actions, values }` with the rows back to back, without padding.
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::SerializeStruct;
-        /// The stored rows' values, row by row.
-        struct Values<'a>(&'a QTable);
-        impl Serialize for Values<'_> {
-            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                use serde::ser::SerializeSeq;
-                let table = self.0;
-                let mut values =
-                    serializer.serialize_seq(Some(table.n_rows() * table.n_actions))?;
-                for state in 0..table.n_rows() as StateId {
-                    for q in table.stored_row(state).into_iter().flatten() {
-                        values.serialize_element(&q)?;
-                    }
-                }
-                values.end()
-            }
-        }
-        let mut table = serializer.serialize_struct("QTable", 2)?;
-        table.serialize_field("n_actions", &self.n_actions)?;
-        table.serialize_field("values", &Values(self))?;
-        table.end()
-    }
-}
-
-/// A table as a snapshot stores it.
-#[derive(Deserialize)]
-#[serde(rename = "QTable")]
-struct StoredTable {
-    n_actions: usize,
-    values: Vec<f64>,
-}
-
-impl<'de> Deserialize<'de> for QTable {
-    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let stored = StoredTable::deserialize(deserializer)?;
-        let whole_rows = match stored.n_actions {
-            0 => stored.values.is_empty(),
-            n => stored.values.len() % n == 0,
-        };
-        if !whole_rows {
-            return Err(serde::de::Error::custom(format!(
-                "a table of {} actions cannot hold {} values",
-                stored.n_actions,
-                stored.values.len()
-            )));
-        }
-        let mut table = QTable::new(stored.n_actions);
-        for (state, row) in stored.values.chunks_exact(stored.n_actions.max(1)).enumerate() {
-            for (action, &q) in row.iter().enumerate() {
-                *table.value_mut(state as StateId, action) = q;
-            }
-        }
-        Ok(table)
     }
 }
 
@@ -229,45 +139,6 @@ mod tests {
         assert_eq!(t.get(0, 1), -1.5);
         t.terminal(0, 1, &p); // -1.5 + 0.5 * (-1 + 1.5) = -1.25
         assert_eq!(t.get(0, 1), -1.25);
-    }
-
-    /// The layout snapshots have always stored: the rows back to back.
-    #[derive(Serialize)]
-    struct Unpadded {
-        n_actions: usize,
-        values: Vec<f64>,
-    }
-
-    fn encode<T: Serialize>(value: &T) -> Vec<u8> {
-        bincode::serde::encode_to_vec(value, bincode::config::standard()).unwrap()
-    }
-
-    #[test]
-    fn tables_are_stored_row_by_row_without_padding_and_read_back() {
-        for n_actions in [1, 5, 8, 9, 20] {
-            let mut t = QTable::new(n_actions);
-            t.step(2, n_actions - 1, -3.0, 1.0);
-            t.step(0, 0, -1.5, 1.0);
-            let mut values = vec![0.0; 3 * n_actions];
-            values[2 * n_actions + n_actions - 1] = -3.0;
-            values[0] = -1.5;
-            let bytes = encode(&t);
-            assert_eq!(bytes, encode(&Unpadded { n_actions, values }), "{n_actions} actions");
-            let (back, _): (QTable, usize) =
-                bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
-            assert_eq!(back, t);
-            assert_eq!((back.n_rows(), back.get(2, n_actions - 1), back.max(1)), (3, -3.0, 0.0));
-        }
-    }
-
-    #[test]
-    fn a_stored_table_with_a_partial_row_is_refused() {
-        let bytes = encode(&Unpadded { n_actions: 5, values: vec![0.0; 7] });
-        let err =
-            bincode::serde::decode_from_slice::<QTable, _>(&bytes, bincode::config::standard())
-                .unwrap_err()
-                .to_string();
-        assert!(err.contains("a table of 5 actions cannot hold 7 values"), "{err}");
     }
 
     #[test]

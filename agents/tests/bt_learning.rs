@@ -424,39 +424,3 @@ fn a_fresh_copy_keeps_nothing_the_tree_learned_or_ran() {
     assert_eq!(h.tick(), R);
     assert_eq!(h.get("a").progress_seen, [0, 1, 0, 2], "the original's A-a runs on");
 }
-
-/// A learning selector of `children` conditions.
-fn wide_selector(children: usize) -> String {
-    let mut text = format!("LOR {children}\n");
-    for i in 0..children {
-        text.push_str(&format!("- C-c{i} 0\n"));
-    }
-    text
-}
-
-#[test]
-fn a_learning_selector_of_more_than_64_children_is_refused_with_its_line() {
-    use flockstep_agents::bt::parse::parse_tree;
-    use flockstep_agents::bt::replay::OpenCatalog;
-    use flockstep_agents::bt::tree::Tree;
-    use rand::SeedableRng;
-    let nested = wide_selector(65).replace('\n', "\n-");
-    let text = format!("OR 2\n- A-a 0\n- {}", nested.trim_end_matches('-'));
-    let spec = parse_tree("wide.bt", &text, &OpenCatalog::default()).expect("a valid tree");
-    let rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(0);
-    let err = Tree::new(&spec, P, rng).unwrap_err().to_string();
-    assert!(err.contains("wide.bt:3:"), "{err}");
-    assert!(err.contains("65 children; the limit is 64"), "{err}");
-}
-
-#[test]
-fn every_child_of_a_64_child_selector_can_be_chosen() {
-    let mut bt = Bt::with(&wide_selector(64), frozen(1.0), 3);
-    let mut chosen = std::collections::BTreeSet::new();
-    for _ in 0..2000 {
-        bt.tick();
-        chosen.extend(bt.chosen());
-    }
-    assert_eq!(chosen.len(), 64, "all failing conditions are tried: {chosen:?}");
-    assert_eq!(chosen.last(), Some(&63));
-}

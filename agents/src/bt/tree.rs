@@ -55,8 +55,6 @@ pub enum TraceEvent {
 pub enum TreeError {
     #[error("{file}:{line}: this tree may issue up to {worst} commands in one tick; the limit is {limit} (a REPEAT/RETRY count or many actions under one node)")]
     TooManyCommands { file: String, line: usize, worst: u64, limit: usize },
-    #[error("{file}:{line}: this learning selector has {children} children; the limit is {limit}")]
-    TooManyChoices { file: String, line: usize, children: usize, limit: usize },
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -113,9 +111,8 @@ struct Lor {
     running_child: Option<u32>,
     /// The step waiting for its next state: (s, child).
     pending: Option<(StateId, u32)>,
-    /// Bit a set: child a has been tried in this tick (each selector its own: selectors
-    /// nest). A mask rather than a vector keeps it in the selector's own cache line.
-    tried: u64,
+    /// Which children have been tried in this tick (each selector its own: selectors nest).
+    tried: Vec<bool>,
 }
 
 /// A behavior tree ready to tick, with its learning selectors' Q-tables and RNG.
@@ -147,14 +144,6 @@ impl Tree {
                 limit: MAX_COMMANDS,
             });
         }
-        if let Some(lor) = widest_learning_selector(&spec.root) {
-            return Err(TreeError::TooManyChoices {
-                file: spec.source.clone(),
-                line: lor.line,
-                children: lor.children.len(),
-                limit: MAX_CHOICES,
-            });
-        }
         let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
         shape.flatten(&spec.root, &mut 0);
         Ok(Tree::with_shape(Arc::new(shape), params, rng))
@@ -175,7 +164,7 @@ impl Tree {
                 table: QTable::new(node.count as usize),
                 running_child: None,
                 pending: None,
-                tried: 0,
+                tried: vec![false; node.count as usize],
             })
             .collect();
         Tree {
@@ -444,14 +433,14 @@ impl Tree {
         }
         let count = self.shape.nodes[id as usize].count;
         let explore = params.epsilon > 0.0 && self.rng.random::<f64>() < params.epsilon;
-        self.lors[lor].tried = 0;
+        self.lors[lor].tried.fill(false);
         for remaining in (1..=count).rev() {
             let pick = if explore {
                 self.random_untried(lor, remaining)
             } else {
                 self.best_untried(lor, state, count)
             };
-            self.lors[lor].tried |= 1 << pick;
+            self.lors[lor].tried[pick as usize] = true;
             ctx.trace(TraceEvent::Chose { node: id, child: pick });
             let status = self.tick_node(self.child(id, pick), ctx);
             if status == Status::Failure {
@@ -479,7 +468,7 @@ impl Tree {
         let mut best_q = f64::NEG_INFINITY;
         let mut ties = 0u32;
         for a in 0..count {
-            if tried >> a & 1 == 1 {
+            if tried[a as usize] {
                 continue;
             }
             let q = table.get(state, a as usize);
@@ -500,12 +489,8 @@ impl Tree {
     /// A uniformly chosen untried child, `remaining` children being untried.
     fn random_untried(&mut self, lor: usize, remaining: u32) -> u32 {
         let k = self.rng.random_range(0..remaining) as usize;
-        let mut untried = !self.lors[lor].tried;
-        for _ in 0..k {
-            untried &= untried - 1;
-        }
-        debug_assert!(untried != 0, "`remaining` counts the untried children");
-        untried.trailing_zeros()
+        let untried = self.lors[lor].tried.iter().enumerate().filter(|(_, &tried)| !tried);
+        untried.map(|(a, _)| a as u32).nth(k).expect("`remaining` counts the untried children")
     }
 
     fn halt_previous_running(
@@ -606,17 +591,6 @@ impl Shape {
 
 /// Upper bound of the commands one tick can issue: each action issues at most one; loops
 /// multiply their child's bound.
-/// Most children a learning selector may have: its tried children are a `u64` mask.
-pub const MAX_CHOICES: usize = 64;
-
-/// The first learning selector with more than [`MAX_CHOICES`] children, if any.
-fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
-    if matches!(spec.kind, NodeKind::Learning) && spec.children.len() > MAX_CHOICES {
-        return Some(spec);
-    }
-    spec.children.iter().find_map(widest_learning_selector)
-}
-
 fn worst_case_commands(spec: &NodeSpec) -> u64 {
     let children: u64 = spec.children.iter().map(worst_case_commands).sum();
     match &spec.kind {
