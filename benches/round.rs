@@ -9,9 +9,11 @@
 //! progress:
 //! - `warm`: rounds back to back, everything in cache (the in-process runner's case);
 //! - `cold`: 4 MiB of unrelated memory written before each round (more than this machine's
-//!   L2 of 1 MiB per core), only the round timed. In the barrier every process runs after
-//!   another one on its core, so its data has left L2: the cold figure is the one the
-//!   multi-process run pays. (Round minus one-trial round) / 3 is the cost of a trial.
+//!   L2 of 1 MiB per core), only the round timed: a process whose data others pushed out of
+//!   its caches. In the barrier every process runs after another one on its core, so the
+//!   multi-process run pays something between the two.
+//!
+//! (Round at 4 trials minus round at 1) / 3 is the cost of a trial.
 
 use clap::Parser;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
