@@ -17,11 +17,9 @@
 
 use clap::Parser;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use flockstep_agents::agent::UavAgent;
-use flockstep_proto::{Action, EpisodeReport, Observation};
 use flockstep_supervisor::cli::Cli;
 use flockstep_supervisor::config::RunConfig;
-use flockstep_world::sim::World;
+use flockstep_supervisor::inproc::Simulation;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -30,54 +28,25 @@ const TRAINING_ROUNDS: u64 = 300_000;
 /// Memory written before each cold round; larger than one core's L2.
 const EVICTION_BYTES: usize = 4 << 20;
 
-/// A world and its agents in one process, as the in-process runner drives them.
-struct Round {
-    world: World,
-    agents: Vec<UavAgent>,
-    observation: Box<Observation>,
-    actions: Vec<Action>,
-    reports: Vec<EpisodeReport>,
+/// The in-process runner's simulation (the main job's configuration: s3, 2 UAVs, seed 7)
+/// with `trials` trials, trained for [`TRAINING_ROUNDS`].
+fn trained(trials: usize) -> Simulation {
+    let args = format!("supervisor --uavs 2 --trials {trials} --seed 7 --eval-episodes 0");
+    let cli = Cli::parse_from(args.split(' '));
+    let mut config = RunConfig::resolve(&cli.run).expect("the main job's configuration");
+    config.episodes.train_episodes = u64::MAX;
+    let mut simulation = Simulation::new(&config).expect("a simulation of s3");
+    for _ in 0..TRAINING_ROUNDS {
+        round(&mut simulation);
+    }
+    simulation
 }
 
-impl Round {
-    /// The main job's configuration (s3, 2 UAVs, seed 7) with `trials` trials, trained for
-    /// [`TRAINING_ROUNDS`].
-    fn trained(trials: usize) -> Round {
-        let args = format!("supervisor --uavs 2 --trials {trials} --seed 7 --eval-episodes 0");
-        let cli = Cli::parse_from(args.split(' '));
-        let mut config = RunConfig::resolve(&cli.run).expect("the main job's configuration");
-        config.episodes.train_episodes = u64::MAX;
-        let world = World::new(config.scenario.clone(), 2, trials, 7, config.episodes)
-            .expect("a world of s3");
-        let agents = (0..2)
-            .map(|slot| UavAgent::new(&config.agent_spec(slot)).expect("an agent of s3"))
-            .collect();
-        let mut round = Round {
-            world,
-            agents,
-            observation: Box::default(),
-            actions: (0..2).map(Action::new).collect(),
-            reports: Vec::new(),
-        };
-        for _ in 0..TRAINING_ROUNDS {
-            round.step();
-        }
-        round
-    }
-
-    /// One barrier round.
-    fn step(&mut self) {
-        self.world.observe(&mut self.observation);
-        for (agent, action) in self.agents.iter_mut().zip(&mut self.actions) {
-            agent.act(&self.observation, action).expect("a well-formed observation");
-        }
-        for action in &self.actions {
-            self.world.apply(action).expect("a well-formed action");
-        }
-        self.world.end_round(&mut self.reports);
-        black_box(&self.reports);
-        self.reports.clear();
-    }
+/// One barrier round.
+fn round(simulation: &mut Simulation) {
+    let stop = simulation.act().expect("the agents answer");
+    assert!(!stop, "an endless training budget never stops");
+    black_box(simulation.step().expect("the world takes the answers").count());
 }
 
 /// Writes one byte in every cache line of `memory`.
@@ -92,9 +61,9 @@ fn rounds(c: &mut Criterion) {
     let mut group = c.benchmark_group("round");
     let mut eviction = vec![0u8; EVICTION_BYTES];
     for trials in [1, 4] {
-        let mut round = Round::trained(trials);
+        let mut simulation = trained(trials);
         group.bench_function(BenchmarkId::new("warm", format!("trials={trials}")), |b| {
-            b.iter(|| round.step())
+            b.iter(|| round(&mut simulation))
         });
         group.bench_function(BenchmarkId::new("cold", format!("trials={trials}")), |b| {
             b.iter_custom(|iters| {
@@ -102,7 +71,7 @@ fn rounds(c: &mut Criterion) {
                 for _ in 0..iters {
                     evict(&mut eviction);
                     let start = Instant::now();
-                    round.step();
+                    round(&mut simulation);
                     timed += start.elapsed();
                 }
                 timed

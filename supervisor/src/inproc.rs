@@ -7,7 +7,7 @@ use crate::recorder::Recorder;
 use anyhow::{Context, Result};
 use flockstep_agents::agent::UavAgent;
 use flockstep_agents::snapshot::{restore_snapshots, write_snapshots};
-use flockstep_proto::{Action, Observation, ObservationKind};
+use flockstep_proto::{Action, EpisodeReport, Observation, ObservationKind};
 use flockstep_world::sim::World;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -15,54 +15,92 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// a tenth of a 1-trial round.
 const REDRAW_EVERY_ROUNDS: u64 = 1024;
 
+/// The world, its agents and the messages between them, in one process. A barrier round is
+/// [`Simulation::act`] then [`Simulation::step`]; `benches/round.rs` times exactly these.
+pub struct Simulation {
+    world: World,
+    agents: Vec<UavAgent>,
+    observation: Box<Observation>,
+    actions: Vec<Action>,
+    reports: Vec<EpisodeReport>,
+}
+
+impl Simulation {
+    /// A fresh world and agents for `config` (untrained; see [`run`] for `--resume`).
+    pub fn new(config: &RunConfig) -> Result<Simulation> {
+        let world = World::new(
+            config.scenario.clone(),
+            config.uavs,
+            config.trials,
+            config.seed,
+            config.episodes,
+        )?;
+        let agents = (0..config.uavs)
+            .map(|slot| UavAgent::new(&config.agent_spec(slot)))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Simulation {
+            world,
+            agents,
+            observation: Box::default(),
+            actions: (0..config.uavs).map(Action::new).collect(),
+            reports: Vec::new(),
+        })
+    }
+
+    /// The first half of a round: the world's broadcast and every agent's answer to it.
+    /// Returns whether this was the stop round (every trial done; nothing more to step).
+    pub fn act(&mut self) -> Result<bool> {
+        self.world.observe(&mut self.observation);
+        for (agent, action) in self.agents.iter_mut().zip(self.actions.iter_mut()) {
+            agent
+                .act(&self.observation, action)
+                .with_context(|| format!("agent {}", agent.slot() + 1))?;
+        }
+        Ok(self.observation.kind == ObservationKind::Stop as u8)
+    }
+
+    /// The second half: the world applies the answers and ends the round. Returns the
+    /// episodes that ended in it.
+    pub fn step(&mut self) -> Result<std::vec::Drain<'_, EpisodeReport>> {
+        for action in &self.actions {
+            self.world.apply(action).context("world rejected an action")?;
+        }
+        self.world.end_round(&mut self.reports);
+        Ok(self.reports.drain(..))
+    }
+
+    /// The round the last [`Simulation::act`] answered.
+    pub fn round(&self) -> u64 {
+        self.observation.round
+    }
+}
+
 /// Runs the whole experiment; returns `true` if it ran to the end, `false` if stopped.
 pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Result<bool> {
-    let mut world = World::new(
-        config.scenario.clone(),
-        config.uavs,
-        config.trials,
-        config.seed,
-        config.episodes,
-    )?;
-    let mut agents = (0..config.uavs)
-        .map(|slot| UavAgent::new(&config.agent_spec(slot)))
-        .collect::<Result<Vec<_>, _>>()?;
+    let mut simulation = Simulation::new(config)?;
     let tree = config.tree_text();
     if let Some(dir) = &config.resume {
-        for agent in &mut agents {
+        for agent in &mut simulation.agents {
             restore_snapshots(agent, dir, config.scenario.name(), config.comm, &tree)?;
         }
     }
-    let mut observation = Box::<Observation>::default();
-    let mut actions: Vec<Box<Action>> =
-        (0..config.uavs).map(|slot| Box::new(Action::new(slot))).collect();
-    let mut reports = Vec::new();
     recorder.set_live(config.uavs);
     let finished = loop {
-        world.observe(&mut observation);
-        for (agent, action) in agents.iter_mut().zip(actions.iter_mut()) {
-            agent
-                .act(&observation, action)
-                .with_context(|| format!("agent {}", agent.slot() + 1))?;
-        }
-        if observation.kind == ObservationKind::Stop as u8 {
+        if simulation.act()? {
             break true;
         }
         if stop.load(Ordering::Relaxed) {
             break false;
         }
-        for action in &actions {
-            world.apply(action).context("world rejected an action")?;
-        }
-        world.end_round(&mut reports);
-        for report in reports.drain(..) {
+        let round = simulation.round();
+        for report in simulation.step()? {
             recorder.record(&report)?;
         }
-        if observation.round % REDRAW_EVERY_ROUNDS == 0 {
+        if round % REDRAW_EVERY_ROUNDS == 0 {
             recorder.redraw();
         }
     };
-    for agent in &agents {
+    for agent in &simulation.agents {
         write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)?;
     }
     Ok(finished)
