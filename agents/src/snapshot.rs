@@ -268,24 +268,6 @@ mod tests {
     use flockstep_world::scenario::Scenario;
     use std::sync::Arc;
 
-    /// A results directory of its own, removed when dropped.
-    struct Scratch(PathBuf);
-
-    impl Scratch {
-        fn new(name: &str) -> Scratch {
-            let dir = std::env::temp_dir()
-                .join(format!("flockstep-snapshot-{name}-{}", std::process::id()));
-            std::fs::create_dir_all(&dir).unwrap();
-            Scratch(dir)
-        }
-    }
-
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            std::fs::remove_dir_all(&self.0).ok();
-        }
-    }
-
     impl Snapshot {
         /// What `agent` has learned so far, built field by field: what the borrowed encoding
         /// must decode to.
@@ -330,12 +312,12 @@ mod tests {
 
     #[test]
     fn a_written_snapshot_reads_back_and_replaces_the_previous_one() {
-        let dir = Scratch::new("replace");
+        let dir = tempfile::tempdir().unwrap();
         let mut agent = uav1();
-        let path = write(&agent, &dir.0);
+        let path = write(&agent, dir.path());
         assert!(read_snapshot(&path).unwrap().expect("the first snapshot").states.is_empty());
         learn_one_state(&mut agent);
-        write(&agent, &dir.0);
+        write(&agent, dir.path());
         let read = read_snapshot(&path).unwrap().expect("the second snapshot");
         assert_eq!(read, Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree"));
         assert_eq!(read.states.len(), 1);
@@ -369,9 +351,9 @@ mod tests {
 
     #[test]
     fn a_crash_between_removal_and_rename_leaves_a_snapshot_to_read() {
-        let dir = Scratch::new("crash");
+        let dir = tempfile::tempdir().unwrap();
         let agent = uav1();
-        let path = write(&agent, &dir.0);
+        let path = write(&agent, dir.path());
         std::fs::rename(&path, partial_path(&path)).unwrap();
         let read = read_snapshot(&path).unwrap().expect("the complete partial file is used");
         assert_eq!(read, Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree"));
@@ -379,9 +361,9 @@ mod tests {
 
     #[test]
     fn a_torn_partial_file_is_never_used() {
-        let dir = Scratch::new("torn");
+        let dir = tempfile::tempdir().unwrap();
         let mut agent = uav1();
-        let path = write(&agent, &dir.0);
+        let path = write(&agent, dir.path());
         learn_one_state(&mut agent);
         let bytes = encode_snapshot(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
         std::fs::write(partial_path(&path), &bytes[..bytes.len() / 2]).unwrap();
@@ -393,8 +375,8 @@ mod tests {
 
     #[test]
     fn a_damaged_snapshot_is_an_error_naming_its_file() {
-        let dir = Scratch::new("damaged");
-        let path = write(&uav1(), &dir.0);
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(&uav1(), dir.path());
         std::fs::write(&path, b"not a snapshot").unwrap();
         let err = read_snapshot(&path).unwrap_err().to_string();
         assert!(err.contains("uav1_trial0.bin") && err.contains("not a flockstep"), "{err}");

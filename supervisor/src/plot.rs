@@ -107,13 +107,13 @@ mod tests {
 
     #[test]
     fn episode_axis_labels_are_whole_numbers() {
-        let path = std::env::temp_dir().join(format!("flockstep-plot-{}.svg", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("curve.svg");
         let values: Vec<f64> = (0..=10_000).map(|e| 100.0 - e as f64 / 200.0).collect();
         let series = [Series::from_values("UAV1".into(), &values)];
         let optimum = [Reference { label: "optimum".into(), value: 11.5 }];
         plot_curves(&path, "test", &series, &optimum).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
-        std::fs::remove_file(&path).unwrap();
         // The SVG backend writes each text on a line of its own.
         let texts: Vec<&str> = svg.lines().map(str::trim).collect();
         let numbers: Vec<&&str> = texts.iter().filter(|t| t.parse::<f64>().is_ok()).collect();
