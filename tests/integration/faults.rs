@@ -4,7 +4,7 @@
 
 use crate::harness::{
     assert_nothing_left, episode_rows, pids_with, read, run_id, scratch, signal, summary,
-    supervise, wait_until, words, Supervised, AGENT,
+    supervise, wait_until, words, world_log, Supervised, AGENT,
 };
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
@@ -142,8 +142,7 @@ fn an_agent_that_dies_before_joining_does_not_hold_up_the_run() {
     ));
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
-    let log =
-        String::from_utf8(read(&dir.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    let log = world_log(dir.path());
     assert!(log.contains("its process ended before it asked to join uav=2"), "{log}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], true, "{s:#}");
@@ -302,8 +301,7 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
     assert!(status.status.success(), "{report}");
     let sent = rogue.join().expect("the rogue thread");
     assert!(sent >= 50, "the rogue sent only {sent} messages");
-    let log =
-        String::from_utf8(read(&shm.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    let log = world_log(shm.path());
     assert!(
         log.contains("dropped an invalid action") || log.contains("does not answer"),
         "no rejection logged:\n{log}"
@@ -329,8 +327,7 @@ fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
     ));
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
-    let log =
-        String::from_utf8(read(&dir.path().join("logs").join("world.log"))).expect("UTF-8 log");
+    let log = world_log(dir.path());
     assert!(log.contains("silent past the deadline") && log.contains("uav=2"), "{log}");
     let notes = summary(dir.path())["notes"].to_string();
     assert!(

@@ -81,6 +81,11 @@ pub fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
 
+/// The world's log of the run whose results are in `dir`.
+pub fn world_log(dir: &Path) -> String {
+    String::from_utf8(read(&dir.join("logs").join("world.log"))).expect("the world log is UTF-8")
+}
+
 pub fn repo_file(relative: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(relative)
 }
