@@ -107,6 +107,10 @@ pub enum Command {
 }
 
 impl Command {
+    /// The largest valid code: the codes are `0..=MAX_CODE`.
+    pub const MAX_CODE: u8 = Command::NextWaypoint as u8;
+
+    #[inline]
     pub fn from_u8(v: u8) -> Option<Command> {
         match v {
             0 => Some(Command::Rotate),
@@ -142,7 +146,9 @@ impl Pose {
         Heading::from_u8(self.heading).unwrap_or(Heading::N)
     }
 
-    /// Checks every field against the route length of its UAV.
+    /// Checks every field against the route length of its UAV. Inlined: agents check every
+    /// pose they receive.
+    #[inline]
     pub fn validate(self, route_len: usize) -> Result<(), crate::FieldError> {
         crate::check_below("pose.waypoint", self.waypoint.into(), route_len as u64)?;
         crate::check_below("pose.height", self.height.into(), 2)?;

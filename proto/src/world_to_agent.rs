@@ -165,6 +165,7 @@ impl Observation {
 
     /// Slots in use, as far as the message can hold them (a reader checks `n_slots` against
     /// what it expects; this never indexes past the arrays).
+    #[inline]
     fn slots(&self) -> usize {
         (self.n_slots as usize).min(MAX_AGENTS)
     }
@@ -178,6 +179,7 @@ impl Observation {
     ///
     /// # Panics
     /// If `trial >= MAX_TRIALS` (a reader's own trial count, never a received one).
+    #[inline]
     pub fn trial(&self, trial: usize) -> TrialObservation<'_> {
         let n = self.slots();
         TrialObservation { header: &self.trials[trial], agents: &self.views[trial * n..][..n] }
@@ -187,6 +189,7 @@ impl Observation {
     ///
     /// # Panics
     /// If `n_trials > MAX_TRIALS` or `n_slots > MAX_AGENTS` (the world's own counts).
+    #[inline]
     pub fn shape_mut(
         &mut self,
         n_trials: usize,

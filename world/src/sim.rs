@@ -12,10 +12,10 @@
 //! everyone is reset and a new target drawn. After the training budget each trial runs its
 //! greedy-evaluation budget with a separate random stream, then it is done.
 
-use crate::scenario::Scenario;
+use crate::scenario::{state_index, state_pose, Scenario};
 use flockstep_proto::{
-    seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Flags, Observation,
-    ObservationKind, Phase, Pose, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
+    seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Heading, Height, Observation,
+    ObservationKind, Phase, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
 };
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -36,14 +36,36 @@ pub struct EpisodeConfig {
     pub tick_cap: u32,
 }
 
+/// What the world reads of an agent slot's route in every tick of every trial, taken from
+/// the scenario once: no look through the scenario's tables and their bounds per use.
+#[derive(Debug, Clone)]
+struct Route {
+    /// Waypoints.
+    len: usize,
+    /// Per state ([`state_index`]), the candidate targets seen: the route's part of the
+    /// scenario's visibility table.
+    sees: Box<[u64]>,
+}
+
+impl Route {
+    fn new(scenario: &Scenario, slot: usize) -> Route {
+        let len = scenario.route_len(slot);
+        let states = len * Height::ALL.len() * Heading::ALL.len();
+        let sees = (0..states).map(|s| scenario.visible_targets(slot, state_pose(s))).collect();
+        Route { len, sees }
+    }
+}
+
 /// The ground truth of one agent slot in one trial.
 #[derive(Debug, Clone, Copy)]
 struct SlotTruth {
-    pose: Pose,
-    /// The episode length if it finished, else 0.
+    /// The slot's view in the next observation, for as long as it is a member: its pose,
+    /// whether it finished, the flags it sent in the last tick. Kept in wire form, so that
+    /// observing a slot is a copy; only `sees_target` is left to the observation.
+    view: AgentView,
+    /// The episode length if it finished (then its bit in `TrialWorld::finished` and
+    /// `view.finished` are set too), else 0.
     finished_at: u32,
-    /// The flags it sent in the last tick, relayed in the next observation.
-    flags: Flags,
 }
 
 /// The ground truth of one trial.
@@ -58,6 +80,9 @@ pub struct TrialWorld {
     members: u64,
     /// Agent slots admitted to the run that join at the next episode start.
     joining: u64,
+    /// Agent slots that finished the current episode: whether everyone finished is one
+    /// test against `members`, not a walk over the slots, at the end of every tick.
+    finished: u64,
     /// Per agent slot, side by side: a tick reads and writes each slot's fields together.
     slots: Vec<SlotTruth>,
     phase: Phase,
@@ -94,14 +119,8 @@ impl TrialWorld {
             eval_rng: rng(seed::WORLD_EVAL),
             members,
             joining: 0,
-            slots: vec![
-                SlotTruth {
-                    pose: scenario.start_pose(),
-                    finished_at: 0,
-                    flags: Flags::default()
-                };
-                slots
-            ],
+            finished: 0,
+            slots: vec![SlotTruth { view: AgentView::default(), finished_at: 0 }; slots],
             phase: Phase::Train,
             trained: 0,
             evaluated: 0,
@@ -172,11 +191,7 @@ impl TrialWorld {
     fn start_episode(&mut self) {
         self.members |= self.joining;
         self.joining = 0;
-        let start = self.scenario.start_pose();
-        for slot in &mut self.slots {
-            slot.pose = start;
-            slot.finished_at = 0;
-        }
+        self.finished = 0;
         self.episode_tick = 0;
         self.episode_start = self.tick;
         let n_targets = self.scenario.n_targets();
@@ -185,86 +200,82 @@ impl TrialWorld {
             Phase::Eval => &mut self.eval_rng,
         };
         self.target = rng.random_range(0..n_targets);
+        let start = self.scenario.start_pose();
+        for truth in &mut self.slots {
+            truth.view = AgentView {
+                pose: start,
+                member: 1,
+                flags: truth.view.flags,
+                ..AgentView::default()
+            };
+            truth.finished_at = 0;
+        }
     }
 
     /// Writes this trial's part of the round's broadcast.
-    pub fn observe(&self, out: &mut TrialHeader, views: &mut [AgentView]) {
+    #[inline]
+    fn observe(&self, routes: &[Route], out: &mut TrialHeader, views: &mut [AgentView]) {
         out.episode = self.episode();
         out.tick = self.tick;
         out.episode_tick = self.episode_tick;
         out.done = self.done as u8;
         out.phase = self.phase as u8;
         out.members = self.members;
-        for (slot, (view, truth)) in views.iter_mut().zip(&self.slots).enumerate() {
+        let slots = views.iter_mut().zip(&self.slots).zip(routes);
+        for (slot, ((view, truth), route)) in slots.enumerate() {
             if self.members & (1 << slot) == 0 {
-                *view = Default::default();
+                *view = AgentView::default();
                 continue;
             }
-            view.pose = truth.pose;
-            view.sees_target =
-                (self.scenario.visible_targets(slot, truth.pose) >> self.target & 1) as u8;
-            view.finished = (truth.finished_at != 0) as u8;
-            view.member = 1;
-            view.flags = truth.flags;
+            *view = truth.view;
+            view.sees_target = (route.sees[state_index(view.pose)] >> self.target & 1) as u8;
         }
-    }
-
-    /// Checks agent `slot`'s action against its route before anything is applied.
-    pub fn check(&self, slot: usize, action: &TrialAction) -> Result<(), FieldError> {
-        let route_len = self.scenario.route_len(slot) as u64;
-        flockstep_proto::check_below("flags.waypoint", action.flags.waypoint.into(), route_len)?;
-        flockstep_proto::check_below("flags.sees_target", action.flags.sees_target.into(), 2)?;
-        flockstep_proto::check_below("action.ended", action.ended.into(), 2)?;
-        let targets = self.scenario.n_targets();
-        let valid = if targets >= 64 { u64::MAX } else { (1 << targets) - 1 };
-        for (field, mask) in [
-            ("flags.ruled_out", action.flags.ruled_out),
-            ("flags.confirmed", action.flags.confirmed),
-        ] {
-            if mask & !valid != 0 {
-                return Err(FieldError {
-                    field,
-                    value: mask,
-                    expected: format!("a mask within {valid:#x}"),
-                });
-            }
-        }
-        action.check_commands()
     }
 
     /// Applies agent `slot`'s checked action for this tick: its commands in the order
-    /// issued, its episode end, its flags.
-    pub fn apply(&mut self, slot: usize, action: &TrialAction) {
-        if self.done || self.members & (1 << slot) == 0 {
+    /// issued (on its route of `route_len` waypoints), its episode end, its flags.
+    #[inline]
+    fn apply(&mut self, slot: usize, route_len: usize, action: &TrialAction) {
+        let bit = 1 << slot;
+        if self.done || self.members & bit == 0 {
             return;
         }
-        let route_len = self.scenario.route_len(slot);
         let truth = &mut self.slots[slot];
-        truth.flags = action.flags;
-        if truth.finished_at != 0 {
+        truth.view.flags = action.flags;
+        if self.finished & bit != 0 {
             return; // hovering: only its flags count
         }
         for command in action.commands() {
-            truth.pose = truth.pose.apply(command, route_len);
+            truth.view.pose = truth.view.pose.apply(command, route_len);
         }
         if action.ended == 1 {
             truth.finished_at = self.episode_tick + 1;
+            truth.view.finished = 1;
+            self.finished |= bit;
         }
     }
 
     /// Ends the tick. If the shared episode is over (every member finished, or the tick
-    /// cap), returns its report and starts the next episode, phase, or marks the trial done.
-    pub fn end_tick(&mut self) -> Option<EpisodeReport> {
+    /// cap), appends its report (with the barrier's agent slots `live`) to `reports` and
+    /// starts the next episode, phase, or marks the trial done.
+    #[inline]
+    fn end_tick(&mut self, live: u64, reports: &mut Vec<EpisodeReport>) {
         if self.done {
-            return None;
+            return;
         }
         self.tick += 1;
         self.episode_tick += 1;
-        let everyone_finished =
-            slots_in(self.members).all(|slot| self.slots[slot].finished_at != 0);
-        if !everyone_finished && self.episode_tick < self.config.tick_cap {
-            return None;
+        let everyone_finished = self.members & !self.finished == 0;
+        if everyone_finished || self.episode_tick >= self.config.tick_cap {
+            reports.push(self.end_episode(live));
         }
+    }
+
+    /// Reports the episode that just ended and moves on to the next one. Kept out of
+    /// [`TrialWorld::end_tick`], which runs in every tick and is inlined into the round:
+    /// episodes end in about one tick in twenty.
+    #[inline(never)]
+    fn end_episode(&mut self, live: u64) -> EpisodeReport {
         let mut report = EpisodeReport {
             trial: self.trial,
             target: self.target as u16,
@@ -272,6 +283,7 @@ impl TrialWorld {
             episode: self.episode(),
             start_tick: self.episode_start,
             members: self.members,
+            live,
             ..EpisodeReport::default()
         };
         for slot in slots_in(self.members) {
@@ -285,7 +297,7 @@ impl TrialWorld {
         if !self.done {
             self.start_episode();
         }
-        Some(report)
+        report
     }
 
     pub fn is_done(&self) -> bool {
@@ -305,12 +317,26 @@ impl TrialWorld {
     }
 }
 
+/// A mask of the lowest `n` bits (`n` up to 64).
+fn low_bits(n: usize) -> u64 {
+    if n >= 64 {
+        u64::MAX
+    } else {
+        (1 << n) - 1
+    }
+}
+
 /// Every trial of a run: the world's side of the barrier.
 #[derive(Debug, Clone)]
 pub struct World {
     trials: Vec<TrialWorld>,
     round: u64,
     live: u64,
+    /// Per agent slot (one per route, at most `MAX_AGENTS`): its route, the same in every
+    /// trial.
+    routes: Vec<Route>,
+    /// The bits of the scenario's candidate targets: an action's target masks stay within.
+    valid_targets: u64,
 }
 
 /// Why a world cannot be built.
@@ -346,24 +372,27 @@ impl World {
         if config.tick_cap == 0 {
             return Err(WorldSetupError::TickCap);
         }
-        let live = if agents == 64 { u64::MAX } else { (1u64 << agents) - 1 };
+        let live = low_bits(agents);
+        let routes = (0..scenario.agent_slots()).map(|slot| Route::new(&scenario, slot)).collect();
+        let valid_targets = low_bits(scenario.n_targets());
         let trials = (0..trials)
             .map(|k| TrialWorld::new(scenario.clone(), k, run_seed, config, live))
             .collect();
-        Ok(World { trials, round: 0, live })
+        Ok(World { trials, round: 0, live, routes, valid_targets })
     }
 
     /// Writes the broadcast of the current round (a `Stop` once every trial is done).
     pub fn observe(&self, out: &mut Observation) {
         out.round = self.round;
         out.live = self.live;
-        out.kind =
-            if self.all_done() { ObservationKind::Stop } else { ObservationKind::Tick } as u8;
+        let mut all_done = true;
         for (trial, (header, views)) in
             self.trials.iter().zip(out.shape_mut(self.trials.len(), self.slots()))
         {
-            trial.observe(header, views);
+            trial.observe(&self.routes, header, views);
+            all_done &= trial.is_done();
         }
+        out.kind = if all_done { ObservationKind::Stop } else { ObservationKind::Tick } as u8;
     }
 
     /// Takes one agent's action for the current round, after checking it answers this
@@ -392,21 +421,21 @@ impl World {
                 expected: format!("{}", self.trials.len()),
             });
         }
-        for (trial, part) in self.trials.iter().zip(&action.trials) {
-            trial.check(slot, part)?;
+        // An unknown route has no waypoints: its flags fail the check.
+        let route_len = self.routes.get(slot).map_or(0, |route| route.len);
+        for part in &action.trials[..self.trials.len()] {
+            part.check(route_len, self.valid_targets)?;
         }
         for (trial, part) in self.trials.iter_mut().zip(&action.trials) {
-            trial.apply(slot, part);
+            trial.apply(slot, route_len, part);
         }
         Ok(())
     }
 
     /// Closes the round: every trial ends its tick; finished episodes go to `reports`.
     pub fn end_round(&mut self, reports: &mut Vec<EpisodeReport>) {
-        let first = reports.len();
-        reports.extend(self.trials.iter_mut().filter_map(TrialWorld::end_tick));
-        for report in &mut reports[first..] {
-            report.live = self.live;
+        for trial in &mut self.trials {
+            trial.end_tick(self.live, reports);
         }
         self.round += 1;
     }
@@ -434,7 +463,7 @@ impl World {
 
     /// Agent slots of the run: one per route (at most `MAX_AGENTS`).
     pub fn slots(&self) -> usize {
-        self.trials.first().map_or(0, |t| t.scenario.agent_slots())
+        self.routes.len()
     }
 
     /// Admits agent `slot` to the barrier from the next round on; each trial lets it take
@@ -452,5 +481,147 @@ impl World {
         for trial in &mut self.trials {
             trial.remove(slot);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use flockstep_proto::{Command, Flags};
+
+    const CONFIG: EpisodeConfig = EpisodeConfig {
+        train_episodes: 10,
+        eval_episodes: 0,
+        eval_every: 0,
+        eval_block: 0,
+        tick_cap: 100,
+    };
+
+    /// A world of s3 (routes of 11 and 5 waypoints, 2 targets), both UAVs, 2 trials.
+    fn s3_world() -> World {
+        let scenario = Arc::new(Scenario::resolve("s3").expect("s3 is built in"));
+        World::new(scenario, 2, 2, 1, CONFIG).expect("a world of s3")
+    }
+
+    /// A well-formed action of `slot` for round 0 of `s3_world`.
+    fn action(slot: usize) -> Action {
+        let mut action = Action::new(slot);
+        action.n_trials = 2;
+        for part in &mut action.trials[..2] {
+            part.push(Command::Rotate);
+            part.flags = Flags { valid: 1, waypoint: 4, ..Flags::default() };
+        }
+        action
+    }
+
+    fn observation(world: &World) -> Box<Observation> {
+        let mut observation = Box::<Observation>::default();
+        world.observe(&mut observation);
+        observation
+    }
+
+    #[test]
+    fn every_bad_field_is_refused_with_its_name_value_and_range() {
+        type Spoil = fn(&mut Action);
+        let cases: [(usize, Spoil, (&str, u64, &str)); 16] = [
+            (0, |a| a.agent = 64, ("action.agent", 64, "< 64")),
+            (0, |a| a.agent = 5, ("action.agent", 5, "a live agent slot")),
+            (0, |a| a.round = 7, ("action.round", 7, "0")),
+            (0, |a| a.n_trials = 999, ("action.n_trials", 999, "2")),
+            (0, |a| a.trials[1].flags.waypoint = 11, ("flags.waypoint", 11, "< 11")),
+            (1, |a| a.trials[0].flags.waypoint = 5, ("flags.waypoint", 5, "< 5")),
+            (1, |a| a.trials[1].flags.sees_target = 2, ("flags.sees_target", 2, "< 2")),
+            (0, |a| a.trials[0].ended = 2, ("action.ended", 2, "< 2")),
+            (
+                0,
+                |a| a.trials[1].flags.ruled_out = 0b100,
+                ("flags.ruled_out", 4, "a mask within 0x3"),
+            ),
+            (
+                1,
+                |a| a.trials[0].flags.confirmed = 1 << 63,
+                ("flags.confirmed", 1 << 63, "a mask within 0x3"),
+            ),
+            (0, |a| a.trials[1].n_commands = 17, ("action.n_commands", 17, "< 17")),
+            (0, |a| a.trials[0].commands[0] = 4, ("action.command", 4, "0..=3")),
+            (
+                1,
+                |a| {
+                    a.trials[1].push(Command::Elevate);
+                    a.trials[1].commands[1] = 255;
+                },
+                ("action.command", 255, "0..=3"),
+            ),
+            // The first bad field in message order is the one reported.
+            (
+                0,
+                |a| {
+                    a.trials[0].ended = 3;
+                    a.trials[0].flags.waypoint = 200;
+                },
+                ("flags.waypoint", 200, "< 11"),
+            ),
+            (
+                0,
+                |a| {
+                    a.trials[0].commands[0] = 9;
+                    a.trials[0].flags.confirmed = 0b1000;
+                },
+                ("flags.confirmed", 8, "a mask within 0x3"),
+            ),
+            (
+                0,
+                |a| {
+                    a.trials[0].n_commands = 40;
+                    a.trials[1].flags.sees_target = 7;
+                },
+                ("action.n_commands", 40, "< 17"),
+            ),
+        ];
+        for (slot, spoil, (field, value, expected)) in cases {
+            let mut world = s3_world();
+            let before = observation(&world);
+            let mut bad = action(slot);
+            spoil(&mut bad);
+            let err = world.apply(&bad).unwrap_err();
+            assert_eq!((err.field, err.value, err.expected.as_str()), (field, value, expected));
+            assert_eq!(observation(&world), before, "a bad action changes nothing");
+        }
+    }
+
+    #[test]
+    fn command_codes_past_the_count_are_not_looked_at() {
+        let mut world = s3_world();
+        let mut fine = action(0);
+        fine.trials[0].commands[1] = 77;
+        fine.trials[1].n_commands = 0;
+        fine.trials[1].commands[0] = 77;
+        assert_eq!(world.apply(&fine), Ok(()));
+    }
+
+    #[test]
+    fn an_episode_ends_when_every_remaining_member_has_finished() {
+        let mut world = s3_world();
+        let mut reports = Vec::new();
+        let mut first = action(0);
+        first.trials[0].ended = 1;
+        world.apply(&first).expect("a good action");
+        world.apply(&action(1)).expect("a good action");
+        world.end_round(&mut reports);
+        assert!(reports.is_empty(), "UAV2 still flies");
+
+        world.remove(1);
+        let mut hover = action(0);
+        hover.round = 1;
+        world.apply(&hover).expect("a good action");
+        world.end_round(&mut reports);
+        let [report] = reports.as_slice() else { panic!("one report: {reports:?}") };
+        assert_eq!((report.trial, report.members, report.live, report.truncated), (0, 1, 1, 0));
+        assert_eq!(report.lengths[..2], [1, 0]);
+        let view = observation(&world).trial(0).agents[0];
+        assert_eq!(
+            (view.finished, view.member, view.pose),
+            (0, 1, Scenario::resolve("s3").unwrap().start_pose())
+        );
     }
 }
