@@ -191,6 +191,7 @@ impl TrialAgent {
     }
 
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
+    #[inline]
     fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
         for peer in slots_in(obs.header.members & live & !(1 << self.slot)) {
             if let Some(view) = obs.agents.get(peer) {

@@ -78,11 +78,18 @@ impl QTable {
         self.values.get(state as usize * self.n_actions + action).copied().unwrap_or(0.0)
     }
 
+    /// The stored values of state `s`, or `None` if its row was never written (all zeros).
+    /// One bounds check for the whole row: the learning selector scans it on every tick.
+    #[inline]
+    pub fn stored_row(&self, state: StateId) -> Option<&[f64]> {
+        let start = state as usize * self.n_actions;
+        self.values.get(start..start + self.n_actions)
+    }
+
     /// max_b Q(s, b).
     #[inline]
     pub fn max(&self, state: StateId) -> f64 {
-        let start = state as usize * self.n_actions;
-        match self.values.get(start..start + self.n_actions) {
+        match self.stored_row(state) {
             Some(row) => row.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             None => 0.0,
         }

@@ -65,7 +65,8 @@ impl StateSpace {
         let key = |id: StateId| &keys[id as usize * key_len..(id as usize + 1) * key_len];
         if let Some(&id) = self.ids.find(hash, |&id| {
             let stored = key(id);
-            stored[0] == first && stored[1..] == *rest
+            // Word by word: a slice comparison would call `memcmp` for a word or two.
+            stored[0] == first && stored[1..].iter().zip(rest).all(|(a, b)| a == b)
         }) {
             return id;
         }

@@ -70,6 +70,27 @@ fn malformed_tree_names_file_line_and_column() {
 }
 
 #[test]
+fn trees_past_the_engine_limits_name_file_and_line() {
+    let dir = scratch();
+    let wide = dir.path().join("wide.bt");
+    // Conditions issue no commands, so only the width is past a limit.
+    let children = "-- C-seeTarget 0\n".repeat(65);
+    std::fs::write(&wide, format!("OR 1\n- LOR 65\n{children}")).expect("write the tree");
+    let wide = wide.display().to_string();
+    for_both_transports(
+        &["--bt", &wide],
+        &[&format!("{wide}:2:"), "learning selector has 65 children; the limit is 64"],
+    );
+    let busy = dir.path().join("busy.bt");
+    std::fs::write(&busy, "REPEAT 1 n=17\n- A-rotate 0\n").expect("write the tree");
+    let busy = busy.display().to_string();
+    for_both_transports(
+        &["--bt", &busy],
+        &[&format!("{busy}:1:"), "up to 17 commands in one tick; the limit is 16"],
+    );
+}
+
+#[test]
 fn zero_uavs() {
     for_both_transports(&["--uavs", "0"], &["--uavs must be at least 1"]);
 }

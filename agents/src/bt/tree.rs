@@ -3,8 +3,10 @@
 //! The [`TreeSpec`] is flattened into an arena of nodes, the tree's shape, which the copies
 //! of a tree share (a UAV ticks one copy per trial); each copy keeps its own run-time state
 //! per node (running or not, memory index, decorator counter, action progress), its
-//! parallel nodes' results, its learning selectors and its RNG. Leaves run through a [`TickContext`] callback, so the tree does no I/O and knows
-//! nothing of UAVs: the same engine drives the agent, the tests and `agent bt replay`.
+//! parallel nodes' results, its learning selectors and its RNG. A tick walks the shape by
+//! reference while it changes the run-time state, so neither is reached through the other.
+//! Leaves run through a [`TickContext`] callback, so the tree does no I/O and knows nothing
+//! of UAVs: the same engine drives the agent, the tests and `agent bt replay`.
 //!
 //! Semantics (SPEC 1.2, agreeing with BehaviorTree.CPP): `AND`/`OR` are reactive
 //! (ReactiveSequence / ReactiveFallback), `AND*`/`OR*` resume at their running child
@@ -55,7 +57,13 @@ pub enum TraceEvent {
 pub enum TreeError {
     #[error("{file}:{line}: this tree may issue up to {worst} commands in one tick; the limit is {limit} (a REPEAT/RETRY count or many actions under one node)")]
     TooManyCommands { file: String, line: usize, worst: u64, limit: usize },
+    #[error("{file}:{line}: this learning selector has {children} children; the limit is {limit}")]
+    WideLearningSelector { file: String, line: usize, children: usize, limit: usize },
 }
+
+/// Most children a learning selector may have: a tick keeps the children it tried in one
+/// word. (Its Q-table has a column per child; 64 actions is far past any tree of the thesis.)
+pub const MAX_LEARNING_CHILDREN: usize = 64;
 
 #[derive(Debug, Clone, Copy)]
 enum Op {
@@ -111,14 +119,18 @@ struct Lor {
     running_child: Option<u32>,
     /// The step waiting for its next state: (s, child).
     pending: Option<(StateId, u32)>,
-    /// Which children have been tried in this tick (each selector its own: selectors nest).
-    tried: Vec<bool>,
 }
 
 /// A behavior tree ready to tick, with its learning selectors' Q-tables and RNG.
 #[derive(Debug, Clone)]
 pub struct Tree {
     shape: Arc<Shape>,
+    run: Run,
+}
+
+/// The run-time state of one copy of a tree; every tick function walks `shape` beside it.
+#[derive(Debug, Clone)]
+struct Run {
     /// Run-time state by node id.
     state: Vec<NodeState>,
     /// Parallel nodes: per child slot, 0 = not finished, 1 = SUCCESS, 2 = FAILURE.
@@ -135,6 +147,15 @@ impl Tree {
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
+        Tree::check(spec)?;
+        let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
+        shape.flatten(&spec.root, &mut 0);
+        Ok(Tree::with_shape(Arc::new(shape), params, rng))
+    }
+
+    /// Whether the tree fits the engine's limits (commands per tick, learning selector
+    /// width). [`Tree::new`] checks this too; a run checks it before it starts any process.
+    pub fn check(spec: &TreeSpec) -> Result<(), TreeError> {
         let worst = worst_case_commands(&spec.root);
         if worst > MAX_COMMANDS as u64 {
             return Err(TreeError::TooManyCommands {
@@ -144,14 +165,20 @@ impl Tree {
                 limit: MAX_COMMANDS,
             });
         }
-        let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
-        shape.flatten(&spec.root, &mut 0);
-        Ok(Tree::with_shape(Arc::new(shape), params, rng))
+        if let Some(wide) = widest_learning_selector(&spec.root) {
+            return Err(TreeError::WideLearningSelector {
+                file: spec.source.clone(),
+                line: wide.line,
+                children: wide.children.len(),
+                limit: MAX_LEARNING_CHILDREN,
+            });
+        }
+        Ok(())
     }
 
     /// A new, untrained copy of this tree with its own RNG, sharing the shape.
     pub fn fresh(&self, rng: Xoshiro256PlusPlus) -> Tree {
-        Tree::with_shape(self.shape.clone(), self.params, rng)
+        Tree::with_shape(self.shape.clone(), self.run.params, rng)
     }
 
     fn with_shape(shape: Arc<Shape>, params: LearnParams, rng: Xoshiro256PlusPlus) -> Tree {
@@ -164,34 +191,33 @@ impl Tree {
                 table: QTable::new(node.count as usize),
                 running_child: None,
                 pending: None,
-                tried: vec![false; node.count as usize],
             })
             .collect();
-        Tree {
+        let run = Run {
             state: vec![NodeState::default(); shape.nodes.len()],
             finished: vec![0; shape.children.len()],
-            shape,
             lors,
             params,
             rng,
-        }
+        };
+        Tree { shape, run }
     }
 
     /// Ticks the tree once from the root.
     pub fn tick(&mut self, ctx: &mut impl TickContext) -> Status {
-        self.tick_node(0, ctx)
+        self.run.tick_node(&self.shape, 0, ctx)
     }
 
     /// Halts every running node (e.g. when an episode ends) without learning from it.
     pub fn halt(&mut self, ctx: &mut impl TickContext) {
-        self.halt_node(0, ctx);
+        self.run.halt_node(&self.shape, 0, ctx);
     }
 
     /// The episode ended because the UAV finished: every pending learning step gets the
     /// terminal update (no bootstrap), so the choice that revealed the target gets credit.
     pub fn end_episode_terminal(&mut self) {
-        let params = self.params;
-        for lor in &mut self.lors {
+        let params = self.run.params;
+        for lor in &mut self.run.lors {
             if let Some((s, a)) = lor.pending.take() {
                 if params.learn {
                     lor.table.terminal(s, a as usize, &params);
@@ -202,8 +228,8 @@ impl Tree {
 
     /// The episode was cut by the tick cap in state `last`: pending steps bootstrap from it.
     pub fn end_episode_truncated(&mut self, last: StateId) {
-        let params = self.params;
-        for lor in &mut self.lors {
+        let params = self.run.params;
+        for lor in &mut self.run.lors {
             if let Some((s, a)) = lor.pending.take() {
                 if params.learn {
                     lor.table.bootstrap(s, a as usize, last, &params);
@@ -213,24 +239,25 @@ impl Tree {
     }
 
     pub fn set_params(&mut self, params: LearnParams) {
-        self.params = params;
+        self.run.params = params;
     }
 
     /// The learning selectors' Q-tables, in pre-order.
     pub fn tables(&self) -> Vec<&QTable> {
-        self.lors.iter().map(|l| &l.table).collect()
+        self.run.lors.iter().map(|l| &l.table).collect()
     }
 
     /// Replaces the Q-tables (loading a snapshot). Shapes must match.
     pub fn set_tables(&mut self, tables: Vec<QTable>) -> Result<(), String> {
-        if tables.len() != self.lors.len() {
+        let lors = &mut self.run.lors;
+        if tables.len() != lors.len() {
             return Err(format!(
                 "snapshot has {} learning selectors, the tree has {}",
                 tables.len(),
-                self.lors.len()
+                lors.len()
             ));
         }
-        for (i, (lor, table)) in self.lors.iter().zip(&tables).enumerate() {
+        for (i, (lor, table)) in lors.iter().zip(&tables).enumerate() {
             if lor.table.n_actions() != table.n_actions() {
                 return Err(format!(
                     "learning selector {} has {} children, its snapshot table {}",
@@ -240,7 +267,7 @@ impl Tree {
                 ));
             }
         }
-        for (lor, table) in self.lors.iter_mut().zip(tables) {
+        for (lor, table) in lors.iter_mut().zip(tables) {
             lor.table = table;
         }
         Ok(())
@@ -259,14 +286,18 @@ impl Tree {
     pub fn node_count(&self) -> usize {
         self.shape.nodes.len()
     }
+}
 
+impl Shape {
     #[inline]
     fn child(&self, node: NodeId, i: u32) -> NodeId {
-        self.shape.children[(self.shape.nodes[node as usize].first + i) as usize]
+        self.children[(self.nodes[node as usize].first + i) as usize]
     }
+}
 
-    fn tick_node(&mut self, id: NodeId, ctx: &mut impl TickContext) -> Status {
-        let node = self.shape.nodes[id as usize];
+impl Run {
+    fn tick_node(&mut self, shape: &Shape, id: NodeId, ctx: &mut impl TickContext) -> Status {
+        let node = shape.nodes[id as usize];
         let status = match node.op {
             Op::Condition { leaf } => {
                 if ctx.check_condition(leaf) {
@@ -281,27 +312,29 @@ impl Tree {
                 self.state[id as usize].memory = progress;
                 status
             }
-            Op::Sequence => self.tick_reactive(id, Status::Success, ctx),
-            Op::Fallback => self.tick_reactive(id, Status::Failure, ctx),
-            Op::SequenceMemory => self.tick_memory(id, Status::Success, ctx),
-            Op::FallbackMemory => self.tick_memory(id, Status::Failure, ctx),
-            Op::Learning { lor } => self.tick_learning(id, lor as usize, ctx),
-            Op::Parallel { success_threshold } => self.tick_parallel(id, success_threshold, ctx),
-            Op::Inverter => match self.tick_node(self.child(id, 0), ctx) {
+            Op::Sequence => self.tick_reactive(shape, id, Status::Success, ctx),
+            Op::Fallback => self.tick_reactive(shape, id, Status::Failure, ctx),
+            Op::SequenceMemory => self.tick_memory(shape, id, Status::Success, ctx),
+            Op::FallbackMemory => self.tick_memory(shape, id, Status::Failure, ctx),
+            Op::Learning { lor } => self.tick_learning(shape, id, lor as usize, ctx),
+            Op::Parallel { success_threshold } => {
+                self.tick_parallel(shape, id, success_threshold, ctx)
+            }
+            Op::Inverter => match self.tick_node(shape, shape.child(id, 0), ctx) {
                 Status::Success => Status::Failure,
                 Status::Failure => Status::Success,
                 Status::Running => Status::Running,
             },
-            Op::ForceSuccess => match self.tick_node(self.child(id, 0), ctx) {
+            Op::ForceSuccess => match self.tick_node(shape, shape.child(id, 0), ctx) {
                 Status::Running => Status::Running,
                 _ => Status::Success,
             },
-            Op::ForceFailure => match self.tick_node(self.child(id, 0), ctx) {
+            Op::ForceFailure => match self.tick_node(shape, shape.child(id, 0), ctx) {
                 Status::Running => Status::Running,
                 _ => Status::Failure,
             },
-            Op::Repeat { times } => self.tick_loop(id, times, Status::Success, ctx),
-            Op::Retry { attempts } => self.tick_loop(id, attempts, Status::Failure, ctx),
+            Op::Repeat { times } => self.tick_loop(shape, id, times, Status::Success, ctx),
+            Op::Retry { attempts } => self.tick_loop(shape, id, attempts, Status::Failure, ctx),
         };
         self.state[id as usize].running = status == Status::Running;
         ctx.trace(TraceEvent::Ticked { node: id, status });
@@ -311,12 +344,18 @@ impl Tree {
     /// `AND` (`go_on` = SUCCESS) and `OR` (`go_on` = FAILURE): tick from the first child on
     /// every tick; the first child not returning `go_on` decides, and every later child that
     /// was still RUNNING from an earlier tick is halted (it is no longer reached).
-    fn tick_reactive(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
-        let count = self.shape.nodes[id as usize].count;
+    fn tick_reactive(
+        &mut self,
+        shape: &Shape,
+        id: NodeId,
+        go_on: Status,
+        ctx: &mut impl TickContext,
+    ) -> Status {
+        let count = shape.nodes[id as usize].count;
         for i in 0..count {
-            let status = self.tick_node(self.child(id, i), ctx);
+            let status = self.tick_node(shape, shape.child(id, i), ctx);
             if status != go_on {
-                self.halt_children_from(id, i + 1, ctx);
+                self.halt_children_from(shape, id, i + 1, ctx);
                 return status;
             }
         }
@@ -325,11 +364,17 @@ impl Tree {
 
     /// `AND*` / `OR*`: resume at the child that was RUNNING; forget it once the node
     /// returns SUCCESS or FAILURE.
-    fn tick_memory(&mut self, id: NodeId, go_on: Status, ctx: &mut impl TickContext) -> Status {
-        let count = self.shape.nodes[id as usize].count;
+    fn tick_memory(
+        &mut self,
+        shape: &Shape,
+        id: NodeId,
+        go_on: Status,
+        ctx: &mut impl TickContext,
+    ) -> Status {
+        let count = shape.nodes[id as usize].count;
         let mut i = self.state[id as usize].memory;
         while i < count {
-            let status = self.tick_node(self.child(id, i), ctx);
+            let status = self.tick_node(shape, shape.child(id, i), ctx);
             if status == Status::Running {
                 self.state[id as usize].memory = i;
                 return Status::Running;
@@ -347,9 +392,14 @@ impl Tree {
     /// `PAR n m=M`: ticks the children that have not finished, in order; SUCCESS as soon as
     /// M succeeded, FAILURE as soon as n-M+1 failed (success is then impossible); either way
     /// the still-running children are halted and the results forgotten.
-    fn tick_parallel(&mut self, id: NodeId, threshold: u32, ctx: &mut impl TickContext) -> Status {
-        let (first, count) =
-            (self.shape.nodes[id as usize].first, self.shape.nodes[id as usize].count);
+    fn tick_parallel(
+        &mut self,
+        shape: &Shape,
+        id: NodeId,
+        threshold: u32,
+        ctx: &mut impl TickContext,
+    ) -> Status {
+        let NodeShape { first, count, .. } = shape.nodes[id as usize];
         let slots = first as usize..(first + count) as usize;
         let mut successes = self.finished[slots.clone()].iter().filter(|&&f| f == 1).count() as u32;
         let mut failures = self.finished[slots.clone()].iter().filter(|&&f| f == 2).count() as u32;
@@ -357,7 +407,7 @@ impl Tree {
             if self.finished[slot] != 0 {
                 continue;
             }
-            match self.tick_node(self.shape.children[slot], ctx) {
+            match self.tick_node(shape, shape.children[slot], ctx) {
                 Status::Success => {
                     self.finished[slot] = 1;
                     successes += 1;
@@ -376,7 +426,7 @@ impl Tree {
                 None
             };
             if let Some(status) = decided {
-                self.halt_children_from(id, 0, ctx);
+                self.halt_children_from(shape, id, 0, ctx);
                 self.finished[slots].fill(0);
                 return status;
             }
@@ -389,14 +439,15 @@ impl Tree {
     /// finishes with `go_on`; the count survives a RUNNING child.
     fn tick_loop(
         &mut self,
+        shape: &Shape,
         id: NodeId,
         limit: u32,
         go_on: Status,
         ctx: &mut impl TickContext,
     ) -> Status {
-        let child = self.child(id, 0);
+        let child = shape.child(id, 0);
         loop {
-            let status = self.tick_node(child, ctx);
+            let status = self.tick_node(shape, child, ctx);
             if status == Status::Running {
                 return Status::Running;
             }
@@ -422,8 +473,15 @@ impl Tree {
     /// a child that was RUNNING on the previous tick and is not that child is halted.
     ///
     /// The order is drawn lazily: only as many children as are tried are ranked, which
-    /// gives the same distribution as sorting the whole list (uniform among ties).
-    fn tick_learning(&mut self, id: NodeId, lor: usize, ctx: &mut impl TickContext) -> Status {
+    /// gives the same distribution as sorting the whole list (uniform among ties). The
+    /// children tried so far are a local mask, so nested selectors keep theirs apart.
+    fn tick_learning(
+        &mut self,
+        shape: &Shape,
+        id: NodeId,
+        lor: usize,
+        ctx: &mut impl TickContext,
+    ) -> Status {
         let state = ctx.rl_state();
         let params = self.params;
         if let Some((s, a)) = self.lors[lor].pending.take() {
@@ -431,70 +489,42 @@ impl Tree {
                 self.lors[lor].table.bootstrap(s, a as usize, state, &params);
             }
         }
-        let count = self.shape.nodes[id as usize].count;
+        let count = shape.nodes[id as usize].count;
         let explore = params.epsilon > 0.0 && self.rng.random::<f64>() < params.epsilon;
-        self.lors[lor].tried.fill(false);
+        let mut tried = 0u64;
         for remaining in (1..=count).rev() {
             let pick = if explore {
-                self.random_untried(lor, remaining)
+                random_untried(tried, remaining, &mut self.rng)
             } else {
-                self.best_untried(lor, state, count)
+                match self.lors[lor].table.stored_row(state) {
+                    Some(row) => best_untried(tried, row.iter().copied(), &mut self.rng),
+                    // A row never written reads as zeros: every untried child ties.
+                    None => best_untried(tried, (0..count).map(|_| 0.0), &mut self.rng),
+                }
             };
-            self.lors[lor].tried[pick as usize] = true;
+            tried |= 1 << pick;
             ctx.trace(TraceEvent::Chose { node: id, child: pick });
-            let status = self.tick_node(self.child(id, pick), ctx);
+            let status = self.tick_node(shape, shape.child(id, pick), ctx);
             if status == Status::Failure {
                 if params.learn {
                     self.lors[lor].table.bootstrap(state, pick as usize, state, &params);
                 }
                 continue;
             }
-            self.halt_previous_running(id, lor, pick, ctx);
+            self.halt_previous_running(shape, id, lor, pick, ctx);
             let entry = &mut self.lors[lor];
             entry.running_child = (status == Status::Running).then_some(pick);
             entry.pending = Some((state, pick));
             return status;
         }
-        self.halt_previous_running(id, lor, u32::MAX, ctx);
+        self.halt_previous_running(shape, id, lor, u32::MAX, ctx);
         self.lors[lor].running_child = None;
         Status::Failure
     }
 
-    /// The untried child with the highest Q(s, .); ties are broken uniformly by the RNG.
-    #[inline]
-    fn best_untried(&mut self, lor: usize, state: StateId, count: u32) -> u32 {
-        let Lor { table, tried, .. } = &self.lors[lor];
-        let mut best = u32::MAX;
-        let mut best_q = f64::NEG_INFINITY;
-        let mut ties = 0u32;
-        for a in 0..count {
-            if tried[a as usize] {
-                continue;
-            }
-            let q = table.get(state, a as usize);
-            if q > best_q || best == u32::MAX {
-                best = a;
-                best_q = q;
-                ties = 1;
-            } else if q == best_q {
-                ties += 1;
-                if self.rng.random_range(0..ties) == 0 {
-                    best = a;
-                }
-            }
-        }
-        best
-    }
-
-    /// A uniformly chosen untried child, `remaining` children being untried.
-    fn random_untried(&mut self, lor: usize, remaining: u32) -> u32 {
-        let k = self.rng.random_range(0..remaining) as usize;
-        let untried = self.lors[lor].tried.iter().enumerate().filter(|(_, &tried)| !tried);
-        untried.map(|(a, _)| a as u32).nth(k).expect("`remaining` counts the untried children")
-    }
-
     fn halt_previous_running(
         &mut self,
+        shape: &Shape,
         id: NodeId,
         lor: usize,
         now: u32,
@@ -502,26 +532,33 @@ impl Tree {
     ) {
         if let Some(previous) = self.lors[lor].running_child {
             if previous != now {
-                self.halt_node(self.child(id, previous), ctx);
+                self.halt_node(shape, shape.child(id, previous), ctx);
                 self.lors[lor].running_child = None;
             }
         }
     }
 
     /// Halts children `from..` of `id` that are still RUNNING.
-    fn halt_children_from(&mut self, id: NodeId, from: u32, ctx: &mut impl TickContext) {
-        let count = self.shape.nodes[id as usize].count;
-        for i in from..count {
-            self.halt_node(self.child(id, i), ctx);
+    fn halt_children_from(
+        &mut self,
+        shape: &Shape,
+        id: NodeId,
+        from: u32,
+        ctx: &mut impl TickContext,
+    ) {
+        let NodeShape { first, count, .. } = shape.nodes[id as usize];
+        for &child in &shape.children[(first + from.min(count)) as usize..(first + count) as usize]
+        {
+            self.halt_node(shape, child, ctx);
         }
     }
 
     /// Halts `id` if it is RUNNING: its running descendants first, then its own state.
-    fn halt_node(&mut self, id: NodeId, ctx: &mut impl TickContext) {
+    fn halt_node(&mut self, shape: &Shape, id: NodeId, ctx: &mut impl TickContext) {
         if !self.state[id as usize].running {
             return;
         }
-        let node = self.shape.nodes[id as usize];
+        let node = shape.nodes[id as usize];
         match node.op {
             Op::Action { leaf } => {
                 let mut progress = self.state[id as usize].memory;
@@ -531,14 +568,14 @@ impl Tree {
             Op::Condition { .. } => {}
             Op::Parallel { .. } => {
                 let slots = node.first as usize..(node.first + node.count) as usize;
-                self.halt_children_from(id, 0, ctx);
+                self.halt_children_from(shape, id, 0, ctx);
                 self.finished[slots].fill(0);
             }
             Op::Learning { lor } => {
-                self.halt_children_from(id, 0, ctx);
+                self.halt_children_from(shape, id, 0, ctx);
                 self.lors[lor as usize].running_child = None;
             }
-            _ => self.halt_children_from(id, 0, ctx),
+            _ => self.halt_children_from(shape, id, 0, ctx),
         }
         let state = &mut self.state[id as usize];
         state.running = false;
@@ -587,6 +624,58 @@ impl Shape {
         node.count = spec.children.len() as u32;
         id
     }
+}
+
+/// The position of the highest of `values` (one per child) among the children not in
+/// `tried`; ties are broken uniformly by `rng`, the k-th tie replacing the choice with
+/// probability 1/k, so the draws depend only on the values.
+#[inline]
+fn best_untried(
+    tried: u64,
+    values: impl Iterator<Item = f64>,
+    rng: &mut Xoshiro256PlusPlus,
+) -> u32 {
+    let mut best = u32::MAX;
+    let mut best_q = f64::NEG_INFINITY;
+    let mut ties = 0u32;
+    for (a, q) in values.enumerate() {
+        if tried >> a & 1 == 1 {
+            continue;
+        }
+        if q > best_q || best == u32::MAX {
+            best = a as u32;
+            best_q = q;
+            ties = 1;
+        } else if q == best_q {
+            ties += 1;
+            if rng.random_range(0..ties) == 0 {
+                best = a as u32;
+            }
+        }
+    }
+    best
+}
+
+/// A uniformly chosen child not in `tried`, `remaining` children being untried.
+fn random_untried(tried: u64, remaining: u32, rng: &mut Xoshiro256PlusPlus) -> u32 {
+    let mut k = rng.random_range(0..remaining);
+    let mut untried = !tried;
+    loop {
+        let a = untried.trailing_zeros();
+        if k == 0 {
+            return a;
+        }
+        k -= 1;
+        untried &= untried - 1;
+    }
+}
+
+/// The first learning selector (in pre-order) with more children than a tick's mask holds.
+fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
+    if spec.kind == NodeKind::Learning && spec.children.len() > MAX_LEARNING_CHILDREN {
+        return Some(spec);
+    }
+    spec.children.iter().find_map(widest_learning_selector)
 }
 
 /// Upper bound of the commands one tick can issue: each action issues at most one; loops
