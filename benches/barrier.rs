@@ -6,7 +6,7 @@
 //!
 //! `cargo bench --bench barrier -- [--agents N].. [--seconds S] [--repeats K] [--policy S/Y]..`
 //! (S spins, Y yields) prints one line per configuration on stdout, e.g.
-//! `barrier agents=2 strategy=yield-block spins=0 yields=16 rounds_per_s=... vs_first=...`.
+//! `barrier agents=2 strategy=yield-block spins=0 yields=32 rounds_per_s=... vs_first=...`.
 //! Without `--bench` (as under `cargo test --all-targets`) it does a short smoke run. The
 //! binary re-executes itself (`--child-world`, `--child-agent`) for the processes; the
 //! barrier itself is `common/raw_barrier.rs`, which `benches/throughput.rs` shares.

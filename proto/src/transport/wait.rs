@@ -30,10 +30,13 @@ impl WaitPolicy {
 }
 
 impl Default for WaitPolicy {
-    /// Measured best on 2 cores with 2 and 8 agents: 7 to 13 and about 3 times the rounds/s
-    /// of blocking at once (more yields slow 8 agents down, fewer slow 2 agents down).
+    /// Measured on 2 cores with 2 and 8 agents: 7 to 13 and about 3 times the rounds/s of
+    /// blocking at once. The yields must outlast the work of a round, or the waiter blocks
+    /// and pays a wake-up of tens of µs: 16 (about 4 µs when nothing else is runnable) did
+    /// at 1 trial but not at 4, where 32 made 4-trial runs 18% faster and left 8 agents
+    /// as they were (`docs/TRANSPORT.md`, "Waiting strategy").
     fn default() -> Self {
-        WaitPolicy { spins: 0, yields: 16, slice: Duration::from_millis(10) }
+        WaitPolicy { spins: 0, yields: 32, slice: Duration::from_millis(10) }
     }
 }
 
