@@ -88,7 +88,7 @@ impl CommState {
             mode,
             offsets,
             route_lens: route_lens.to_vec(),
-            targets: if targets >= 64 { u64::MAX } else { (1 << targets) - 1 },
+            targets: flockstep_proto::low_bits(targets),
             heard: vec![(0, 0); route_lens.len()],
             own: (0, 0),
             words: vec![UNKNOWN; bits.div_ceil(64)],

@@ -24,7 +24,7 @@ pub mod world_to_supervisor;
 
 pub use agent_to_world::{Action, JoinRequest, TrialAction, ANY_SLOT};
 pub use flags::Flags;
-pub use limits::{slots_in, MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
+pub use limits::{low_bits, slots_in, MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
 pub use pose::{Command, Heading, Height, Pose};
 pub use world_to_agent::{
     AgentView, Observation, ObservationKind, Phase, RunInfo, TrialHeader, TrialObservation,

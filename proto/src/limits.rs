@@ -30,9 +30,29 @@ pub fn slots_in(mut mask: u64) -> impl Iterator<Item = usize> {
     })
 }
 
+/// The mask of the lowest `n` bits (all 64 from `n` = 64 on): the slots of a run of `n`
+/// agents, or the candidate targets of a scenario with `n` of them.
+#[inline]
+pub fn low_bits(n: usize) -> u64 {
+    if n >= 64 {
+        u64::MAX
+    } else {
+        (1 << n) - 1
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn low_bits_masks_the_lowest_n_bits() {
+        assert_eq!(low_bits(0), 0);
+        assert_eq!(low_bits(2), 0b11);
+        assert_eq!(low_bits(63), u64::MAX >> 1);
+        assert_eq!(low_bits(64), u64::MAX);
+        assert_eq!(low_bits(MAX_TARGETS + 1), u64::MAX);
+    }
 
     #[test]
     fn slots_in_lists_the_set_bits_lowest_first() {

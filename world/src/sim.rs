@@ -14,8 +14,8 @@
 
 use crate::scenario::{state_index, state_pose, Scenario};
 use flockstep_proto::{
-    seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Heading, Height, Observation,
-    ObservationKind, Phase, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
+    low_bits, seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Heading, Height,
+    Observation, ObservationKind, Phase, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
 };
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -314,15 +314,6 @@ impl TrialWorld {
     pub fn remove(&mut self, slot: usize) {
         self.members &= !(1 << slot);
         self.joining &= !(1 << slot);
-    }
-}
-
-/// A mask of the lowest `n` bits (`n` up to 64).
-fn low_bits(n: usize) -> u64 {
-    if n >= 64 {
-        u64::MAX
-    } else {
-        (1 << n) - 1
     }
 }
 
