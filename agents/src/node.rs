@@ -221,6 +221,7 @@ fn serve(
                 },
             )?,
         };
+        observation.prefetch_used();
         next_round = observation.round + 1;
         if observation.slot_owners().get(slot) != Some(&nonce) {
             bail!("the world dropped UAV{} from the run (presumed dead)", slot + 1);

@@ -150,6 +150,15 @@ impl Action {
             trials: [TrialAction::default(); MAX_TRIALS],
         }
     }
+
+    /// Starts loading the header and the trials in use, written on the agent's core: see
+    /// [`crate::prefetch`].
+    #[inline]
+    pub fn prefetch_used(&self) {
+        let trials = (self.n_trials as usize).min(MAX_TRIALS);
+        crate::prefetch::prefetch(std::slice::from_ref(&self.round));
+        crate::prefetch::prefetch(&self.trials[..trials]);
+    }
 }
 
 /// Asks the world for a place in the barrier: sent once by every agent when it starts (the

@@ -15,6 +15,7 @@ pub mod flags;
 pub mod limits;
 pub mod logging;
 pub mod pose;
+mod prefetch;
 pub mod seed;
 pub mod services;
 pub mod supervisor_to_world;

@@ -185,6 +185,17 @@ impl Observation {
         TrialObservation { header: &self.trials[trial], agents: &self.views[trial * n..][..n] }
     }
 
+    /// Starts loading the parts a reader of this round will touch (the header, the owners,
+    /// the trials and views in use), written on the world's core: see [`crate::prefetch`].
+    #[inline]
+    pub fn prefetch_used(&self) {
+        let (trials, slots) = ((self.n_trials as usize).min(MAX_TRIALS), self.slots());
+        crate::prefetch::prefetch(std::slice::from_ref(&self.round));
+        crate::prefetch::prefetch(&self.owners[..slots]);
+        crate::prefetch::prefetch(&self.trials[..trials]);
+        crate::prefetch::prefetch(&self.views[..trials * slots]);
+    }
+
     /// Sets the round's shape and hands out each trial's header and views, to be written.
     ///
     /// # Panics

@@ -358,6 +358,7 @@ impl WorldNode {
         let waited =
             ports.waiter().wait(&format_args!("the answers of round {round}"), timeout, || {
                 while let Some(action) = ports.try_action()? {
+                    action.prefetch_used();
                     let slot = action.agent as usize;
                     if action.round != round || slot >= MAX_AGENTS || live & (1 << slot) == 0 {
                         tracing::warn!(
