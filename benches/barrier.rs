@@ -4,9 +4,10 @@
 //! percentiles and CPU per round for several waiting strategies in one invocation, so their
 //! ratios are meaningful on the machine at hand.
 //!
-//! `cargo bench --bench barrier -- [--agents N].. [--seconds S] [--repeats K] [--policy S/Y]..`
-//! (S spins, Y yields) prints one line per configuration on stdout, e.g.
-//! `barrier agents=2 strategy=yield-block spins=0 yields=32 rounds_per_s=... vs_first=...`.
+//! `cargo bench --bench barrier -- [--agents N].. [--seconds S] [--repeats K] [--policy S/Y[/T]]..`
+//! (S spins, Y yields, then yielding until T µs into the wait; T defaults to the product's)
+//! prints one line per configuration on stdout, e.g.
+//! `barrier agents=2 strategy=yield-block spins=0 yields=32 yield_for_us=200 rounds_per_s=...`.
 //! Without `--bench` (as under `cargo test --all-targets`) it does a short smoke run. The
 //! binary re-executes itself (`--child-world`, `--child-agent`) for the processes; the
 //! barrier itself is `common/raw_barrier.rs`, which `benches/throughput.rs` shares.
@@ -17,6 +18,7 @@ mod raw_barrier;
 use flockstep_proto::transport::WaitPolicy;
 use flockstep_proto::MAX_AGENTS;
 use raw_barrier::{measure, Error, Measurement};
+use std::time::Duration;
 
 fn main() {
     raw_barrier::bench_main("barrier", parent);
@@ -37,13 +39,7 @@ fn parent(args: &[String]) -> Result<(), Error> {
             "--seconds" => seconds = value()?.parse()?,
             "--repeats" => repeats = value()?.parse::<usize>()?.max(1),
             "--policy" => {
-                let text = value()?;
-                let (spins, yields) = text.split_once('/').ok_or("--policy takes SPINS/YIELDS")?;
-                policies.push(WaitPolicy {
-                    spins: spins.parse()?,
-                    yields: yields.parse()?,
-                    ..WaitPolicy::default()
-                });
+                policies.push(parse_policy(value()?)?);
             }
             // Other harness flags mean nothing here.
             _ => {}
@@ -53,10 +49,12 @@ fn parent(args: &[String]) -> Result<(), Error> {
         agents = if full { vec![2, 8] } else { vec![2] };
     }
     if policies.is_empty() {
-        // Blocking at once, the tuned default, and the default with a spin phase in front.
+        // Blocking at once, the tuned default, the default blocking right after its counted
+        // yields, and the default with a spin phase in front.
         policies = vec![
             WaitPolicy::BLOCK,
             WaitPolicy::default(),
+            WaitPolicy { yield_for: Duration::ZERO, ..WaitPolicy::default() },
             WaitPolicy { spins: 100, ..WaitPolicy::default() },
         ];
     }
@@ -80,16 +78,37 @@ fn parent(args: &[String]) -> Result<(), Error> {
             let rate = sorted[sorted.len() / 2].rate();
             let base = *baseline.get_or_insert(rate);
             println!(
-                "barrier agents={n} strategy={} spins={} yields={} vs_first={:.2} {}",
+                "barrier agents={n} strategy={} spins={} yields={} yield_for_us={} vs_first={:.2} {}",
                 strategy(policy),
                 policy.spins,
                 policy.yields,
+                policy.yield_for.as_micros(),
                 rate / base,
                 Measurement::describe(&sorted),
             );
         }
     }
     Ok(())
+}
+
+/// `SPINS/YIELDS` or `SPINS/YIELDS/YIELD_FOR_US`.
+fn parse_policy(text: &str) -> Result<WaitPolicy, Error> {
+    let parts: Vec<&str> = text.split('/').collect();
+    let (spins, yields, yield_for) = match parts[..] {
+        [spins, yields] => (spins, yields, None),
+        [spins, yields, micros] => (spins, yields, Some(micros)),
+        _ => return Err(format!("--policy {text}: expected SPINS/YIELDS[/YIELD_FOR_US]").into()),
+    };
+    let default = WaitPolicy::default();
+    Ok(WaitPolicy {
+        spins: spins.parse()?,
+        yields: yields.parse()?,
+        yield_for: match yield_for {
+            Some(micros) => Duration::from_micros(micros.parse()?),
+            None => default.yield_for,
+        },
+        ..default
+    })
 }
 
 fn strategy(policy: &WaitPolicy) -> &'static str {

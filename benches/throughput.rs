@@ -198,9 +198,10 @@ fn number(value: f64) -> String {
 fn print_raw(sorted: &[&Measurement], uavs: usize, options: &Options) {
     let policy = WaitPolicy::default();
     println!(
-        "throughput what=raw-barrier agents={uavs} spins={} yields={} seconds={} {}",
+        "throughput what=raw-barrier agents={uavs} spins={} yields={} yield_for_us={} seconds={} {}",
         policy.spins,
         policy.yields,
+        policy.yield_for.as_micros(),
         options.seconds,
         Measurement::describe(sorted),
     );

@@ -53,8 +53,8 @@ struct ChildArgs {
 
 impl ChildArgs {
     fn parse(args: &[String]) -> Result<ChildArgs, Error> {
-        let [run_id, parent, agents, value, spins, yields] = args else {
-            return Err(format!("child arguments: expected 6, got {args:?}").into());
+        let [run_id, parent, agents, value, spins, yields, yield_for_us] = args else {
+            return Err(format!("child arguments: expected 7, got {args:?}").into());
         };
         let agents: usize = agents.parse()?;
         if !(1..=MAX_AGENTS).contains(&agents) {
@@ -68,6 +68,7 @@ impl ChildArgs {
             policy: WaitPolicy {
                 spins: spins.parse()?,
                 yields: yields.parse()?,
+                yield_for: Duration::from_micros(yield_for_us.parse()?),
                 ..WaitPolicy::default()
             },
         })
@@ -79,6 +80,7 @@ impl ChildArgs {
             .into_iter()
             .cloned()
             .chain([p.spins.to_string(), p.yields.to_string()])
+            .chain([p.yield_for.as_micros().to_string()])
             .collect()
     }
 

@@ -349,7 +349,8 @@ impl WorldNode {
     ) -> Result<Answers> {
         let Self { world, ports, members, .. } = self;
         let (round, live) = (this_round.number, this_round.live);
-        // The clock is read for the death check only once the waiter has begun to block.
+        // The clock is read for the death check only once the waiter's counted polls are over
+        // (it reads the clock itself from then on).
         let policy = ports.waiter().policy();
         let quick_polls = policy.spins + policy.yields;
         let mut failed_polls = 0u32;

@@ -9,15 +9,20 @@ use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use std::fmt::Display;
 use std::time::{Duration, Instant};
 
-/// The three phases of a wait, tuned on a 2-core machine by `benches/barrier.rs`.
+/// The phases of a wait, tuned on a 2-core machine by `benches/barrier.rs`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WaitPolicy {
     /// Polls with only a CPU pause in between. Pays off only with more idle cores than
     /// processes; on 2 cores it keeps the peer that would answer off the CPU.
     pub spins: u32,
     /// Polls with `yield_now` in between: hands the core to a peer that is ready to answer,
-    /// and costs a mere syscall when none is.
+    /// and costs a mere syscall when none is. No clock is read while they last.
     pub yields: u32,
+    /// After the counted yields the waiter goes on yielding until this long after the wait
+    /// began, reading the clock at each poll. A wait that outlasts the counted yields was
+    /// held up (a peer preempted by the host or by another process for a few µs); blocking
+    /// then would add a kernel wake-up of about 50 µs to the hold-up.
+    pub yield_for: Duration,
     /// Longest single block on the listener; bounds how late a missed wake-up or a deadline
     /// can be noticed.
     pub slice: Duration,
@@ -25,8 +30,12 @@ pub struct WaitPolicy {
 
 impl WaitPolicy {
     /// Blocks on the event at once: the least CPU, the most wake-up latency.
-    pub const BLOCK: WaitPolicy =
-        WaitPolicy { spins: 0, yields: 0, slice: Duration::from_millis(10) };
+    pub const BLOCK: WaitPolicy = WaitPolicy {
+        spins: 0,
+        yields: 0,
+        yield_for: Duration::ZERO,
+        slice: Duration::from_millis(10),
+    };
 }
 
 impl Default for WaitPolicy {
@@ -34,11 +43,22 @@ impl Default for WaitPolicy {
     /// blocking at once. The yields must outlast the work of a round, or the waiter blocks
     /// and pays a wake-up of tens of µs: 16 (about 4 µs when nothing else is runnable) did
     /// at 1 trial but not at 4, where 32 made 4-trial runs 18% faster and left 8 agents
-    /// as they were (`docs/TRANSPORT.md`, "Waiting strategy").
+    /// as they were. Even so 0.6 to 1.6% of the rounds had a wait that blocked after a
+    /// hold-up of a few µs, and those rounds took 3 to 12% of the run's time; yielding for
+    /// up to 200 µs cut them to 0.01 to 0.04% of the rounds (`docs/TRANSPORT.md`, "Yielding
+    /// through hold-ups").
     fn default() -> Self {
-        WaitPolicy { spins: 0, yields: 32, slice: Duration::from_millis(10) }
+        WaitPolicy {
+            spins: 0,
+            yields: 32,
+            yield_for: Duration::from_micros(YIELD_FOR_US),
+            slice: Duration::from_millis(10),
+        }
     }
 }
+
+/// How long [`WaitPolicy::default`] yields before it blocks.
+const YIELD_FOR_US: u64 = 200;
 
 /// Waits on one wake-up event: spin, then yield, then block in slices, until `poll` has
 /// something or the deadline passes. Checks the SIGTERM latch on entry and after every block.
@@ -89,6 +109,12 @@ impl Waiter {
             }
             std::thread::yield_now();
         }
+        while start.elapsed() < self.policy.yield_for {
+            if let Some(found) = poll()? {
+                return Ok(found);
+            }
+            std::thread::yield_now();
+        }
         loop {
             if let Some(found) = poll()? {
                 return Ok(found);
@@ -131,5 +157,59 @@ impl Waiter {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::{RunConfig, RunServices, SignalMode, WorldPorts};
+
+    /// The ports of a world in a run of its own, waiting with `policy`. Nothing ever
+    /// notifies its listener, so a wait that blocks sleeps until its slice or deadline ends.
+    fn world_waiting_with(tag: &str, policy: WaitPolicy) -> WorldPorts {
+        let mut run =
+            RunConfig::new(format!("wait-{tag}-{}", std::process::id()), SignalMode::Untouched);
+        run.wait = policy;
+        RunServices::create(&run).and_then(RunServices::into_world).expect("a run of its own")
+    }
+
+    #[test]
+    fn an_answer_held_up_past_the_counted_yields_is_found_by_yielding() {
+        let long = Duration::from_secs(60);
+        let policy = WaitPolicy { spins: 0, yields: 2, yield_for: long, slice: long };
+        let ports = world_waiting_with("held-up", policy);
+        let mut polls = 0u32;
+        // Had the waiter blocked after its 2 yields, it would have slept to the deadline
+        // and timed out with fewer than 5 polls.
+        let found = ports.waiter().wait(&"a held-up answer", Duration::from_secs(5), || {
+            polls += 1;
+            Ok((polls == 1000).then_some(polls))
+        });
+        assert_eq!(found.expect("found while yielding"), 1000);
+    }
+
+    #[test]
+    fn a_waiter_blocks_once_its_yields_and_yield_time_are_spent() {
+        let policy = WaitPolicy {
+            spins: 0,
+            yields: 3,
+            yield_for: Duration::from_micros(100),
+            slice: Duration::from_millis(10),
+        };
+        let ports = world_waiting_with("spent", policy);
+        let mut polls = 0u32;
+        let waited = ports.waiter().wait(&"nothing", Duration::from_millis(100), || {
+            polls += 1;
+            Ok(None::<()>)
+        });
+        assert!(
+            matches!(waited, Err(TransportError::Timeout { .. })),
+            "nothing to find ends in a timeout: {waited:?}"
+        );
+        // 100 µs of yields (a yield costs 0.1 to 2 µs), then about one poll per 10 ms slice:
+        // at most about 1 000 polls. One that never blocked would poll 50 000 times or more
+        // in 100 ms.
+        assert!(polls < 20_000, "{polls} polls: the waiter kept polling instead of blocking");
     }
 }
