@@ -19,7 +19,7 @@ pub struct WaitPolicy {
     /// and costs a mere syscall when none is. No clock is read while they last.
     pub yields: u32,
     /// After the counted yields the waiter goes on yielding until this long after the wait
-    /// began, reading the clock at each poll. A wait that outlasts the counted yields was
+    /// began (or until its deadline, if sooner), reading the clock at each poll. A wait that outlasts the counted yields was
     /// held up (a peer preempted by the host or by another process for a few µs); blocking
     /// then would add a kernel wake-up of about 50 µs to the hold-up.
     pub yield_for: Duration,
@@ -109,7 +109,7 @@ impl Waiter {
             }
             std::thread::yield_now();
         }
-        while start.elapsed() < self.policy.yield_for {
+        while start.elapsed() < self.policy.yield_for.min(timeout) {
             if let Some(found) = poll()? {
                 return Ok(found);
             }
@@ -211,5 +211,19 @@ mod tests {
         // at most about 1 000 polls. One that never blocked would poll 50 000 times or more
         // in 100 ms.
         assert!(polls < 20_000, "{polls} polls: the waiter kept polling instead of blocking");
+    }
+
+    #[test]
+    fn the_deadline_ends_the_yielding_too() {
+        let long = Duration::from_secs(60);
+        let policy = WaitPolicy { spins: 0, yields: 0, yield_for: long, slice: long };
+        let ports = world_waiting_with("deadline", policy);
+        match ports.waiter().wait(&"nothing", Duration::from_millis(50), || Ok(None::<()>)) {
+            // Measured by the waiter itself: yielding on to `yield_for` would report 60 s.
+            Err(TransportError::Timeout { waited, .. }) => {
+                assert!(waited < Duration::from_secs(30), "timed out only after {waited:?}")
+            }
+            other => panic!("nothing to find ends in a timeout: {other:?}"),
+        }
     }
 }
