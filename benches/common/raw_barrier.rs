@@ -79,8 +79,7 @@ impl ChildArgs {
         [&self.run_id, &self.parent.to_string(), &self.agents.to_string(), &self.value.to_string()]
             .into_iter()
             .cloned()
-            .chain([p.spins.to_string(), p.yields.to_string()])
-            .chain([p.yield_for.as_micros().to_string()])
+            .chain([p.spins.to_string(), p.yields.to_string(), p.yield_for.as_micros().to_string()])
             .collect()
     }
 

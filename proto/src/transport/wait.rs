@@ -103,15 +103,14 @@ impl Waiter {
             }
             std::hint::spin_loop();
         }
-        for _ in 0..self.policy.yields {
+        // The counted yields first, without a clock; then on until `yield_for` has passed.
+        let yield_until = self.policy.yield_for.min(timeout);
+        for yielded in 0u64.. {
             if let Some(found) = poll()? {
                 return Ok(found);
             }
-            std::thread::yield_now();
-        }
-        while start.elapsed() < self.policy.yield_for.min(timeout) {
-            if let Some(found) = poll()? {
-                return Ok(found);
+            if yielded >= u64::from(self.policy.yields) && start.elapsed() >= yield_until {
+                break;
             }
             std::thread::yield_now();
         }
