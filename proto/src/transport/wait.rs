@@ -19,9 +19,10 @@ pub struct WaitPolicy {
     /// and costs a mere syscall when none is. No clock is read while they last.
     pub yields: u32,
     /// After the counted yields the waiter goes on yielding until this long after the wait
-    /// began (or until its deadline, if sooner), reading the clock at each poll. A wait that outlasts the counted yields was
-    /// held up (a peer preempted by the host or by another process for a few µs); blocking
-    /// then would add a kernel wake-up to the hold-up (those rounds took 49 to 103 µs).
+    /// began (or until its deadline, if sooner), reading the clock at each poll. A wait that
+    /// outlasts the counted yields was held up (a peer preempted by the host or by another
+    /// process for a few µs); blocking then would add a kernel wake-up to the hold-up
+    /// (those rounds took 49 to 103 µs).
     pub yield_for: Duration,
     /// Longest single block on the listener; bounds how late a missed wake-up or a deadline
     /// can be noticed.
