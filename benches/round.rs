@@ -11,7 +11,11 @@
 //! - `cold`: 4 MiB of unrelated memory written before each round (more than this machine's
 //!   L2 of 1 MiB per core), only the round timed: a process whose data others pushed out of
 //!   its caches. In the barrier every process runs after another one on its core, so the
-//!   multi-process run pays something between the two.
+//!   multi-process run pays something between the two;
+//! - `idle`: before each round the thread only reads the clock for 5, 50 or 200 µs, touching
+//!   none of its data, and only the round is timed: what time alone does to a process's
+//!   caches and predictors on this machine. A round of the barrier comes about 5 µs after
+//!   the same process's last one.
 //!
 //! (Round at 4 trials minus round at 1) / 3 is the cost of a trial.
 
@@ -27,6 +31,9 @@ use std::time::{Duration, Instant};
 const TRAINING_ROUNDS: u64 = 300_000;
 /// Memory written before each cold round; larger than one core's L2.
 const EVICTION_BYTES: usize = 4 << 20;
+/// How long the thread idles before each `idle` round.
+const IDLE_GAPS: [Duration; 3] =
+    [Duration::from_micros(5), Duration::from_micros(50), Duration::from_micros(200)];
 
 /// The in-process runner's simulation (the main job's configuration: s3, 2 UAVs, seed 7)
 /// with `trials` trials, trained for [`TRAINING_ROUNDS`].
@@ -49,6 +56,24 @@ fn round(simulation: &mut Simulation) {
     black_box(simulation.step().expect("the world takes the answers").count());
 }
 
+/// Reads the clock until `gap` has passed, and nothing else.
+fn idle(gap: Duration) {
+    let start = Instant::now();
+    while start.elapsed() < gap {}
+}
+
+/// Times `iters` rounds, each after `before` has run untimed.
+fn timed_rounds(simulation: &mut Simulation, iters: u64, mut before: impl FnMut()) -> Duration {
+    let mut timed = Duration::ZERO;
+    for _ in 0..iters {
+        before();
+        let start = Instant::now();
+        round(simulation);
+        timed += start.elapsed();
+    }
+    timed
+}
+
 /// Writes one byte in every cache line of `memory`.
 fn evict(memory: &mut [u8]) {
     for line in memory.chunks_exact_mut(64) {
@@ -66,17 +91,15 @@ fn rounds(c: &mut Criterion) {
             b.iter(|| round(&mut simulation))
         });
         group.bench_function(BenchmarkId::new("cold", format!("trials={trials}")), |b| {
-            b.iter_custom(|iters| {
-                let mut timed = Duration::ZERO;
-                for _ in 0..iters {
-                    evict(&mut eviction);
-                    let start = Instant::now();
-                    round(&mut simulation);
-                    timed += start.elapsed();
-                }
-                timed
-            })
+            b.iter_custom(|iters| timed_rounds(&mut simulation, iters, || evict(&mut eviction)))
         });
+        for gap in IDLE_GAPS {
+            let id =
+                BenchmarkId::new("idle", format!("trials={trials}/gap_us={}", gap.as_micros()));
+            group.bench_function(id, |b| {
+                b.iter_custom(|iters| timed_rounds(&mut simulation, iters, || idle(gap)))
+            });
+        }
     }
     group.finish();
 }
