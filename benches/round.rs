@@ -14,7 +14,7 @@
 //!   multi-process run pays something between the two;
 //! - `idle`: before each round the thread only reads the clock for 5, 50 or 200 µs, touching
 //!   none of its data, and only the round is timed: what time alone does to a process's
-//!   caches and predictors on this machine. A round of the barrier comes about 5 µs after
+//!   caches and predictors on this machine. A round of the barrier comes 5 to 8 µs after
 //!   the same process's last one.
 //!
 //! (Round at 4 trials minus round at 1) / 3 is the cost of a trial.
