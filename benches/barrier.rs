@@ -17,7 +17,7 @@ mod raw_barrier;
 
 use flockstep_proto::transport::WaitPolicy;
 use flockstep_proto::MAX_AGENTS;
-use raw_barrier::{measure, Error, Measurement};
+use raw_barrier::{measure, parse_policy, Error, Measurement};
 use std::time::Duration;
 
 fn main() {
@@ -89,26 +89,6 @@ fn parent(args: &[String]) -> Result<(), Error> {
         }
     }
     Ok(())
-}
-
-/// `SPINS/YIELDS` or `SPINS/YIELDS/YIELD_FOR_US`.
-fn parse_policy(text: &str) -> Result<WaitPolicy, Error> {
-    let parts: Vec<&str> = text.split('/').collect();
-    let (spins, yields, yield_for) = match parts[..] {
-        [spins, yields] => (spins, yields, None),
-        [spins, yields, micros] => (spins, yields, Some(micros)),
-        _ => return Err(format!("--policy {text}: expected SPINS/YIELDS[/YIELD_FOR_US]").into()),
-    };
-    let default = WaitPolicy::default();
-    Ok(WaitPolicy {
-        spins: spins.parse()?,
-        yields: yields.parse()?,
-        yield_for: match yield_for {
-            Some(micros) => Duration::from_micros(micros.parse()?),
-            None => default.yield_for,
-        },
-        ..default
-    })
 }
 
 fn strategy(policy: &WaitPolicy) -> &'static str {

@@ -53,8 +53,8 @@ struct ChildArgs {
 
 impl ChildArgs {
     fn parse(args: &[String]) -> Result<ChildArgs, Error> {
-        let [run_id, parent, agents, value, spins, yields, yield_for_us] = args else {
-            return Err(format!("child arguments: expected 7, got {args:?}").into());
+        let [run_id, parent, agents, value, policy] = args else {
+            return Err(format!("child arguments: expected 5, got {args:?}").into());
         };
         let agents: usize = agents.parse()?;
         if !(1..=MAX_AGENTS).contains(&agents) {
@@ -65,22 +65,20 @@ impl ChildArgs {
             parent: parent.parse()?,
             agents,
             value: value.parse()?,
-            policy: WaitPolicy {
-                spins: spins.parse()?,
-                yields: yields.parse()?,
-                yield_for: Duration::from_micros(yield_for_us.parse()?),
-                ..WaitPolicy::default()
-            },
+            policy: parse_policy(policy)?,
         })
     }
 
     fn to_args(&self) -> Vec<String> {
         let p = &self.policy;
-        [&self.run_id, &self.parent.to_string(), &self.agents.to_string(), &self.value.to_string()]
-            .into_iter()
-            .cloned()
-            .chain([p.spins.to_string(), p.yields.to_string(), p.yield_for.as_micros().to_string()])
-            .collect()
+        let policy = format!("{}/{}/{}", p.spins, p.yields, p.yield_for.as_micros());
+        vec![
+            self.run_id.clone(),
+            self.parent.to_string(),
+            self.agents.to_string(),
+            self.value.to_string(),
+            policy,
+        ]
     }
 
     /// A supervised child: leaves at its next wait on SIGTERM, and gets SIGTERM when the
@@ -91,6 +89,30 @@ impl ChildArgs {
         run.wait = self.policy;
         Ok(run)
     }
+}
+
+/// A waiting strategy written `SPINS/YIELDS` or `SPINS/YIELDS/YIELD_FOR_US` (the rest, and
+/// a missing `YIELD_FOR_US`, as in the product's default): the `barrier` bench's `--policy`
+/// and the form in which a child gets its strategy.
+pub fn parse_policy(text: &str) -> Result<WaitPolicy, Error> {
+    let parts: Vec<&str> = text.split('/').collect();
+    let (spins, yields, yield_for) = match parts[..] {
+        [spins, yields] => (spins, yields, None),
+        [spins, yields, micros] => (spins, yields, Some(micros)),
+        _ => return Err(format!("--policy {text}: expected SPINS/YIELDS[/YIELD_FOR_US]").into()),
+    };
+    let number =
+        |field: &str| field.parse::<u32>().map_err(|e| format!("--policy {text}: `{field}`: {e}"));
+    let default = WaitPolicy::default();
+    Ok(WaitPolicy {
+        spins: number(spins)?,
+        yields: number(yields)?,
+        yield_for: match yield_for {
+            Some(micros) => Duration::from_micros(number(micros)?.into()),
+            None => default.yield_for,
+        },
+        ..default
+    })
 }
 
 /// Writes what the agents read of a round, as the product's world does (only the parts in
