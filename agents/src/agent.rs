@@ -193,11 +193,8 @@ impl TrialAgent {
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
     #[inline]
     fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
-        for peer in slots_in(obs.header.members & live & !(1 << self.slot)) {
-            if let Some(view) = obs.agents.get(peer) {
-                self.comm.hear(peer, &view.flags)?;
-            }
-        }
+        let peers = obs.header.members & live & !(1 << self.slot);
+        self.comm.hear(peers, obs.agents)?;
         Ok(())
     }
 

@@ -13,7 +13,7 @@
 //! Entries only move up within an episode and are reset when an episode starts; a peer that
 //! leaves the run is forgotten. The packed words go straight into the state key.
 
-use flockstep_proto::{FieldError, Flags};
+use flockstep_proto::{low_bits, slots_in, AgentView, FieldError, Flags};
 
 /// Which communication the agents use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -64,6 +64,8 @@ pub struct CommState {
     heard: Vec<(u64, u64)>,
     /// `compact`: this UAV's own findings in the episode, which it sends.
     own: (u64, u64),
+    /// `compact`: what all peers reported, fused: (ruled out, confirmed).
+    fused: (u64, u64),
     words: Vec<u64>,
 }
 
@@ -88,9 +90,10 @@ impl CommState {
             mode,
             offsets,
             route_lens: route_lens.to_vec(),
-            targets: flockstep_proto::low_bits(targets),
+            targets: low_bits(targets),
             heard: vec![(0, 0); route_lens.len()],
             own: (0, 0),
+            fused: (0, 0),
             words: vec![UNKNOWN; bits.div_ceil(64)],
         }
     }
@@ -100,6 +103,7 @@ impl CommState {
         self.words.fill(UNKNOWN);
         self.heard.fill((0, 0));
         self.own = (0, 0);
+        self.fused = (0, 0);
     }
 
     /// A peer left the run: what is known of it is void.
@@ -116,58 +120,95 @@ impl CommState {
             CommMode::Compact => {
                 if let Some(heard) = self.heard.get_mut(peer) {
                     *heard = (0, 0);
-                    self.fuse();
+                    self.fuse_all();
                 }
             }
         }
     }
 
-    /// Takes in the flags peer `peer` sent in the previous tick. Returns whether the state
-    /// changed. Values out of range are refused (a rogue or buggy sender).
+    /// Takes in the flags each slot in `peers` sent in the previous tick, as the world
+    /// relayed them in `views` (indexed by slot). Messages without `valid`, and from slots
+    /// this state has no entry for, say nothing. Returns whether the state changed. A
+    /// message out of range (a rogue or buggy sender) is refused with an error naming the
+    /// field; what the messages before it said is kept.
+    ///
+    /// One call per tick for all peers, one pass over their messages: with 32 UAVs hearing
+    /// had been three quarters of an agent's work while each peer took a call, its checks
+    /// and, in `compact`, a rewrite of the words of its own.
     #[inline]
-    pub fn hear(&mut self, peer: usize, flags: &Flags) -> Result<bool, FieldError> {
-        if flags.valid == 0 || peer >= self.route_lens.len() {
-            return Ok(false);
-        }
+    pub fn hear(&mut self, peers: u64, views: &[AgentView]) -> Result<bool, FieldError> {
+        let peers = peers & low_bits(views.len().min(self.route_lens.len()));
         match self.mode {
             CommMode::None => Ok(false),
-            CommMode::Flags => {
-                let Some(offset) = self.offsets[peer] else { return Ok(false) };
-                flockstep_proto::check_below(
-                    "flags.waypoint",
-                    flags.waypoint.into(),
-                    self.route_lens[peer] as u64,
-                )?;
-                flockstep_proto::check_below("flags.sees_target", flags.sees_target.into(), 2)?;
-                let value = if flags.sees_target == 1 { HIGH } else { LOW };
-                let bit = offset + 2 * flags.waypoint as usize;
-                if value <= self.get(bit) {
-                    return Ok(false);
-                }
-                self.set(bit, value);
-                Ok(true)
+            CommMode::Flags => self.hear_flags(peers, views),
+            CommMode::Compact => self.hear_compact(peers, views),
+        }
+    }
+
+    /// `flags`: raises each sender's entry for the waypoint it reported.
+    #[inline]
+    fn hear_flags(&mut self, peers: u64, views: &[AgentView]) -> Result<bool, FieldError> {
+        let mut changed = false;
+        for peer in slots_in(peers) {
+            let flags = &views[peer].flags;
+            let Some(offset) = self.offsets[peer] else { continue };
+            if flags.valid == 0 {
+                continue;
             }
-            CommMode::Compact => {
-                for (field, mask) in
-                    [("flags.ruled_out", flags.ruled_out), ("flags.confirmed", flags.confirmed)]
-                {
-                    if mask & !self.targets != 0 {
-                        return Err(FieldError {
-                            field,
-                            value: mask,
-                            expected: format!("a mask within {:#x}", self.targets),
-                        });
-                    }
-                }
-                let heard = &mut self.heard[peer];
-                let merged = (heard.0 | flags.ruled_out, heard.1 | flags.confirmed);
-                if merged == *heard {
-                    return Ok(false);
-                }
-                *heard = merged;
-                Ok(self.fuse())
+            flockstep_proto::check_below(
+                "flags.waypoint",
+                flags.waypoint.into(),
+                self.route_lens[peer] as u64,
+            )?;
+            flockstep_proto::check_below("flags.sees_target", flags.sees_target.into(), 2)?;
+            let value = if flags.sees_target == 1 { HIGH } else { LOW };
+            let bit = offset + 2 * flags.waypoint as usize;
+            if value > self.get(bit) {
+                self.set(bit, value);
+                changed = true;
             }
         }
+        Ok(changed)
+    }
+
+    /// `compact`: adds what each sender reported to what it had, and rewrites the words
+    /// once if the fused findings grew.
+    #[inline]
+    fn hear_compact(&mut self, peers: u64, views: &[AgentView]) -> Result<bool, FieldError> {
+        let (mut ruled, mut confirmed) = (0, 0);
+        let mut refused = None;
+        for peer in slots_in(peers) {
+            let flags = &views[peer].flags;
+            if flags.valid == 0 {
+                continue;
+            }
+            if (flags.ruled_out | flags.confirmed) & !self.targets != 0 {
+                refused = Some(self.outside_targets(flags));
+                break;
+            }
+            let heard = &mut self.heard[peer];
+            heard.0 |= flags.ruled_out;
+            heard.1 |= flags.confirmed;
+            ruled |= flags.ruled_out;
+            confirmed |= flags.confirmed;
+        }
+        let fused = (self.fused.0 | ruled, self.fused.1 | confirmed);
+        let changed = fused != self.fused && {
+            self.fused = fused;
+            self.encode()
+        };
+        refused.map_or(Ok(changed), Err)
+    }
+
+    /// The error for a `compact` message naming candidates the scenario does not have.
+    #[cold]
+    fn outside_targets(&self, flags: &Flags) -> FieldError {
+        let (field, value) = if flags.ruled_out & !self.targets != 0 {
+            ("flags.ruled_out", flags.ruled_out)
+        } else {
+            ("flags.confirmed", flags.confirmed)
+        };
+        FieldError { field, value, expected: format!("a mask within {:#x}", self.targets) }
     }
 
     /// Notes this UAV's own camera result: `in_view` gives the candidate cells its pose
@@ -197,22 +238,26 @@ impl CommState {
         }
     }
 
-    /// `compact`: rewrites the words from what every peer reported; true if they changed.
-    fn fuse(&mut self) -> bool {
-        let (ruled, confirmed) =
-            self.heard.iter().fold((0, 0), |(r, c), &(hr, hc)| (r | hr, c | hc));
-        let before = self.words.clone();
-        for k in 0..64usize.min(self.words.len() * 32) {
-            let value = if confirmed >> k & 1 == 1 {
-                HIGH
-            } else if ruled >> k & 1 == 1 {
-                LOW
-            } else {
-                UNKNOWN
-            };
-            self.set(2 * k, value);
+    /// `compact`: fuses again what every peer reported (after a peer is forgotten) and
+    /// rewrites the words.
+    fn fuse_all(&mut self) {
+        self.fused = self.heard.iter().fold((0, 0), |(r, c), &(hr, hc)| (r | hr, c | hc));
+        self.encode();
+    }
+
+    /// `compact`: writes the words from the fused findings, two bits per candidate
+    /// (confirmed wins over ruled out); true if they changed.
+    fn encode(&mut self) -> bool {
+        let (ruled, confirmed) = self.fused;
+        let low = ruled & !confirmed;
+        let mut changed = false;
+        for (w, word) in self.words.iter_mut().enumerate().take(2) {
+            let half = |mask: u64| spread_bits((mask >> (32 * w)) as u32);
+            let encoded = (half(confirmed) * HIGH) | (half(low) * LOW);
+            changed |= *word != encoded;
+            *word = encoded;
         }
-        before != self.words
+        changed
     }
 
     #[inline]
@@ -260,9 +305,31 @@ impl CommState {
     }
 }
 
+/// Bit k of `x` at bit 2k: one candidate's bit at the low bit of its two-bit entry.
+#[inline]
+fn spread_bits(x: u32) -> u64 {
+    let mut x = u64::from(x);
+    x = (x | x << 16) & 0x0000_ffff_0000_ffff;
+    x = (x | x << 8) & 0x00ff_00ff_00ff_00ff;
+    x = (x | x << 4) & 0x0f0f_0f0f_0f0f_0f0f;
+    x = (x | x << 2) & 0x3333_3333_3333_3333;
+    (x | x << 1) & 0x5555_5555_5555_5555
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Hears `messages` (slot, flags) as the world relays them: in views indexed by slot.
+    fn hear(state: &mut CommState, messages: &[(usize, Flags)]) -> Result<bool, FieldError> {
+        let mut views = vec![AgentView::default(); flockstep_proto::MAX_AGENTS];
+        let mut peers = 0;
+        for &(slot, flags) in messages {
+            views[slot].flags = flags;
+            peers |= 1 << slot;
+        }
+        state.hear(peers, &views)
+    }
 
     fn flags(state: &CommState, wp: u16, sees: bool) -> Flags {
         state.outgoing(wp, sees)
@@ -274,11 +341,11 @@ mod tests {
         let f = |wp, sees| flags(&c, wp, sees);
         let (zero, one) = (f(3, false), f(3, true));
         assert_eq!(c.entry(1, 3), None);
-        assert!(c.hear(1, &zero).unwrap());
+        assert!(hear(&mut c, &[(1, zero)]).unwrap());
         assert_eq!(c.entry(1, 3), Some(false));
-        assert!(c.hear(1, &one).unwrap());
+        assert!(hear(&mut c, &[(1, one)]).unwrap());
         assert_eq!(c.entry(1, 3), Some(true));
-        assert!(!c.hear(1, &zero).unwrap(), "1 never falls back to 0");
+        assert!(!hear(&mut c, &[(1, zero)]).unwrap(), "1 never falls back to 0");
         assert_eq!(c.entry(1, 3), Some(true));
         c.reset();
         assert_eq!(c.entry(1, 3), None);
@@ -288,28 +355,37 @@ mod tests {
     fn own_slot_and_mode_none_keep_no_state() {
         let mut c = CommState::new(CommMode::Flags, 0, &[11, 5], 2);
         let own = flags(&c, 1, true);
-        assert!(!c.hear(0, &own).unwrap());
+        assert!(!hear(&mut c, &[(0, own)]).unwrap());
         let mut none = CommState::new(CommMode::None, 0, &[11, 5], 2);
         assert!(none.words().is_empty());
-        assert!(!none.hear(1, &own).unwrap());
+        assert!(!hear(&mut none, &[(1, own)]).unwrap());
     }
 
     #[test]
     fn out_of_range_values_are_refused() {
         let mut c = CommState::new(CommMode::Flags, 1, &[11, 5], 2);
-        let err = c.hear(0, &flags(&c, 11, true)).unwrap_err();
+        let err = hear(
+            &mut c,
+            &[(0, Flags { valid: 1, waypoint: 11, sees_target: 1, ..Flags::default() })],
+        )
+        .unwrap_err();
         assert_eq!(err.field, "flags.waypoint");
-        assert!(c.hear(0, &flags(&c, 10, true)).is_ok());
+        assert!(hear(
+            &mut c,
+            &[(0, Flags { valid: 1, waypoint: 10, sees_target: 1, ..Flags::default() })]
+        )
+        .is_ok());
         let mut compact = CommState::new(CommMode::Compact, 1, &[11, 5], 2);
         let bad = Flags { valid: 1, ruled_out: 0b100, ..Flags::default() };
-        assert_eq!(compact.hear(0, &bad).unwrap_err().field, "flags.ruled_out");
+        assert_eq!(hear(&mut compact, &[(0, bad)]).unwrap_err().field, "flags.ruled_out");
     }
 
     #[test]
     fn flag_vectors_of_long_routes_span_words() {
         let mut c = CommState::new(CommMode::Flags, 0, &[3, 40, 40], 2);
         assert_eq!(c.words().len(), 3); // 160 bits
-        c.hear(2, &flags(&c, 39, true)).unwrap();
+        hear(&mut c, &[(2, Flags { valid: 1, waypoint: 39, sees_target: 1, ..Flags::default() })])
+            .unwrap();
         assert_eq!(c.entry(2, 39), Some(true));
         assert_eq!(c.entry(1, 39), None);
         c.forget(2);
@@ -323,20 +399,75 @@ mod tests {
         assert_eq!(me.words().len(), 1, "3 candidates: 6 bits, whatever the routes");
         let mut peer = CommState::new(CommMode::Compact, 1, &routes, 3);
         peer.note_own(|| 0b001, false); // candidate 0 in view, no target: ruled out
-        assert!(me.hear(1, &peer.outgoing(0, false)).unwrap());
+        assert!(hear(&mut me, &[(1, peer.outgoing(0, false))]).unwrap());
         assert_eq!((me.entry(0, 0), me.entry(0, 1)), (Some(false), None));
         let mut other = CommState::new(CommMode::Compact, 2, &routes, 3);
         other.note_own(|| 0b010, true); // candidate 1 in view with the target: confirmed
-        assert!(me.hear(2, &other.outgoing(0, true)).unwrap());
+        assert!(hear(&mut me, &[(2, other.outgoing(0, true))]).unwrap());
         assert_eq!(
             (me.entry(0, 0), me.entry(0, 1), me.entry(0, 2)),
             (Some(false), Some(true), None)
         );
-        assert!(!me.hear(2, &other.outgoing(0, true)).unwrap(), "nothing new");
+        assert!(!hear(&mut me, &[(2, other.outgoing(0, true))]).unwrap(), "nothing new");
         me.forget(1);
         assert_eq!(me.entry(0, 0), None, "a departed peer's findings are void");
         assert_eq!(me.entry(0, 1), Some(true));
         me.reset();
         assert_eq!(me.entry(0, 1), None);
+    }
+
+    #[test]
+    fn one_call_takes_in_every_peer_and_keeps_what_came_before_a_bad_message() {
+        let routes = [11, 5, 5, 5];
+        let mut me = CommState::new(CommMode::Compact, 0, &routes, 3);
+        let ruled_0 = Flags { valid: 1, ruled_out: 0b001, ..Flags::default() };
+        let confirmed_2 = Flags { valid: 1, confirmed: 0b100, ..Flags::default() };
+        let silent = Flags { ruled_out: 0b010, ..Flags::default() };
+        assert!(hear(&mut me, &[(1, ruled_0), (2, silent), (3, confirmed_2)]).unwrap());
+        assert_eq!(
+            (me.entry(0, 0), me.entry(0, 1), me.entry(0, 2)),
+            (Some(false), None, Some(true)),
+            "a message without `valid` says nothing"
+        );
+        let outside = Flags { valid: 1, confirmed: 0b1000, ..Flags::default() };
+        let confirmed_1 = Flags { valid: 1, confirmed: 0b010, ..Flags::default() };
+        let ruled_outside = Flags { valid: 1, ruled_out: 0b1000, ..Flags::default() };
+        let err = hear(&mut me, &[(1, confirmed_1), (2, outside), (3, ruled_outside)]).unwrap_err();
+        assert_eq!((err.field, err.value), ("flags.confirmed", 0b1000), "the first bad one");
+        assert_eq!(me.entry(0, 1), Some(true), "the message before the bad one counts");
+
+        let mut c = CommState::new(CommMode::Flags, 0, &routes, 3);
+        let seen = |wp| Flags { valid: 1, sees_target: 1, waypoint: wp, ..Flags::default() };
+        assert!(hear(&mut c, &[(1, seen(2)), (3, seen(4))]).unwrap());
+        assert_eq!((c.entry(1, 2), c.entry(2, 2), c.entry(3, 4)), (Some(true), None, Some(true)));
+        assert!(!hear(&mut c, &[(1, seen(2)), (3, seen(4))]).unwrap(), "nothing new");
+        let err = hear(&mut c, &[(2, seen(0)), (3, seen(5))]).unwrap_err();
+        assert_eq!((err.field, err.value), ("flags.waypoint", 5));
+        assert_eq!(c.entry(2, 0), Some(true), "the message before the bad one counts");
+    }
+
+    #[test]
+    fn compact_words_hold_every_candidate_of_two_words() {
+        // 64 candidates: entries 0..32 in the first word, 32..64 in the second.
+        let routes = [5, 5, 5];
+        let mut me = CommState::new(CommMode::Compact, 0, &routes, 64);
+        assert_eq!(me.words().len(), 2);
+        let ruled = 0x8000_0001_8000_0005_u64;
+        let confirmed = 0x0000_0001_0000_0004_u64 | 1 << 40;
+        let a = Flags { valid: 1, ruled_out: ruled, ..Flags::default() };
+        let b = Flags { valid: 1, confirmed, ..Flags::default() };
+        assert!(hear(&mut me, &[(1, a), (2, b)]).unwrap());
+        for k in 0..64 {
+            let expected = if confirmed >> k & 1 == 1 {
+                Some(true)
+            } else if ruled >> k & 1 == 1 {
+                Some(false)
+            } else {
+                None
+            };
+            assert_eq!(me.entry(0, k), expected, "candidate {k}");
+        }
+        me.forget(2);
+        assert_eq!((me.entry(0, 2), me.entry(0, 40)), (Some(false), None), "peer 2 forgotten");
     }
 }
