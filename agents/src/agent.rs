@@ -191,10 +191,11 @@ impl TrialAgent {
     }
 
     /// Takes in the flags the world relayed: what each live peer sent in the previous tick.
-    #[inline]
+    #[inline(always)]
     fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
-        let peers = obs.header.members & live & !(1 << self.slot);
-        self.comm.hear(peers, obs.agents)?;
+        let header = obs.header;
+        let peers = header.members & live & !(1 << self.slot);
+        self.comm.hear(header.tick, peers, header.flags_changed, obs.agents)?;
         Ok(())
     }
 

@@ -46,6 +46,12 @@ pub struct TrialHeader {
     pub _reserved: [u8; 2],
     /// Bit i set: agent slot i takes part in this trial's episode (its view's `member`).
     pub members: u64,
+    /// Bit i clear: slot i's relayed flags are those relayed in this trial's previous tick,
+    /// if slot i was a member then too (at the trial's first tick every bit is set). Taking
+    /// a message in twice changes nothing, so an agent that took in every peer's message
+    /// of the previous tick reads only the views of these slots and of new members: with
+    /// N UAVs a few views a tick instead of N - 1.
+    pub flags_changed: u64,
 }
 
 impl Default for TrialHeader {
@@ -58,6 +64,7 @@ impl Default for TrialHeader {
             phase: Phase::Train as u8,
             _reserved: [0; 2],
             members: 0,
+            flags_changed: u64::MAX,
         }
     }
 }

@@ -95,6 +95,11 @@ pub struct TrialWorld {
     tick: u64,
     episode_tick: u32,
     episode_start: u64,
+    /// Slots whose flags changed in this tick's actions: relayed as the next observation's
+    /// `flags_changed`.
+    flags_sent: u64,
+    /// The slots whose relayed flags changed since the previous observation.
+    flags_changed: u64,
     target: usize,
     done: bool,
 }
@@ -128,6 +133,8 @@ impl TrialWorld {
             tick: 0,
             episode_tick: 0,
             episode_start: 0,
+            flags_sent: 0,
+            flags_changed: u64::MAX,
             target: 0,
             done: false,
             scenario,
@@ -221,6 +228,7 @@ impl TrialWorld {
         out.done = self.done as u8;
         out.phase = self.phase as u8;
         out.members = self.members;
+        out.flags_changed = self.flags_changed;
         let slots = views.iter_mut().zip(&self.slots).zip(routes);
         for (slot, ((view, truth), route)) in slots.enumerate() {
             if self.members & (1 << slot) == 0 {
@@ -241,6 +249,7 @@ impl TrialWorld {
             return;
         }
         let truth = &mut self.slots[slot];
+        self.flags_sent |= u64::from(truth.view.flags.differs(&action.flags)) << slot;
         truth.view.flags = action.flags;
         if self.finished & bit != 0 {
             return; // hovering: only its flags count
@@ -265,6 +274,7 @@ impl TrialWorld {
         }
         self.tick += 1;
         self.episode_tick += 1;
+        self.flags_changed = std::mem::take(&mut self.flags_sent);
         let everyone_finished = self.members & !self.finished == 0;
         if everyone_finished || self.episode_tick >= self.config.tick_cap {
             reports.push(self.end_episode(live));
@@ -614,5 +624,29 @@ mod tests {
             (view.finished, view.member, view.pose),
             (0, 1, Scenario::resolve("s3").unwrap().start_pose())
         );
+    }
+
+    #[test]
+    fn flags_changed_marks_the_slots_whose_relayed_flags_changed_since_the_last_tick() {
+        let mut world = s3_world();
+        let mut reports = Vec::new();
+        let changed = |world: &World, trial| observation(world).trial(trial).header.flags_changed;
+        assert_eq!(changed(&world, 0), u64::MAX, "the first tick has nothing to compare with");
+        for round in 0..3 {
+            let (mut first, mut second) = (action(0), action(1));
+            (first.round, second.round) = (round, round);
+            if round == 1 {
+                first.trials[1].flags.waypoint = 5; // only UAV1 in trial 1 says something new
+            }
+            world.apply(&first).expect("a good action");
+            world.apply(&second).expect("a good action");
+            world.end_round(&mut reports);
+            let expected = match round {
+                0 => [0b11, 0b11], // every slot's flags went from none to some
+                1 => [0b00, 0b01],
+                _ => [0b00, 0b01], // back to waypoint 4
+            };
+            assert_eq!([changed(&world, 0), changed(&world, 1)], expected, "after round {round}");
+        }
     }
 }
