@@ -116,7 +116,7 @@ impl CommState {
 
     /// A peer left the run: what is known of it is void.
     pub fn forget(&mut self, peer: usize) {
-        self.heard_peers &= !(1 << peer);
+        self.heard_peers &= !1u64.checked_shl(peer as u32).unwrap_or(0);
         match self.mode {
             CommMode::None => {}
             CommMode::Flags => {
@@ -144,8 +144,8 @@ impl CommState {
     ///
     /// Taking a message in twice changes nothing, so after a tick whose messages were all
     /// taken in, only the peers whose flags changed since and the peers not heard then are
-    /// read; otherwise every peer. With 32 UAVs reading every peer's view every tick had
-    /// been three quarters of an agent's work.
+    /// read; otherwise every peer. With 32 UAVs, hearing every peer in every tick had been
+    /// three quarters of an agent's instructions.
     #[inline]
     pub fn hear(
         &mut self,

@@ -49,8 +49,8 @@ pub struct TrialHeader {
     /// Bit i clear: slot i's relayed flags are those relayed in this trial's previous tick,
     /// if slot i was a member then too (at the trial's first tick every bit is set). Taking
     /// a message in twice changes nothing, so an agent that took in every peer's message
-    /// of the previous tick reads only the views of these slots and of new members: with
-    /// N UAVs a few views a tick instead of N - 1.
+    /// of the previous tick reads only the views of the slots set here and of new members:
+    /// with N UAVs a few views a tick instead of N - 1.
     pub flags_changed: u64,
 }
 

@@ -95,10 +95,10 @@ pub struct TrialWorld {
     tick: u64,
     episode_tick: u32,
     episode_start: u64,
-    /// Slots whose flags changed in this tick's actions: relayed as the next observation's
-    /// `flags_changed`.
+    /// Slots whose flags changed in this tick's actions so far.
     flags_sent: u64,
-    /// The slots whose relayed flags changed since the previous observation.
+    /// The observation's `flags_changed`: the slots whose flags changed in the last tick's
+    /// actions (every slot before the first tick).
     flags_changed: u64,
     target: usize,
     done: bool,
