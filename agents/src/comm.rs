@@ -136,8 +136,8 @@ impl CommState {
     }
 
     /// Takes in the flags each slot in `peers` sent in the previous tick, as the world
-    /// relayed them in `views` (indexed by slot) for the trial's tick `tick`, with
-    /// `changed` the observation's `flags_changed`. Messages without `valid`, and from slots
+    /// relayed them in `views` (indexed by slot) for the trial's tick `tick`, with the
+    /// observation's `flags_changed`. Messages without `valid`, and from slots
     /// this state has no entry for, say nothing. Returns whether the state changed. A
     /// message out of range (a rogue or buggy sender) is refused with an error naming the
     /// field; what the messages before it said is kept.
@@ -151,11 +151,11 @@ impl CommState {
         &mut self,
         tick: u64,
         peers: u64,
-        changed: u64,
+        flags_changed: u64,
         views: &[AgentView],
     ) -> Result<bool, FieldError> {
         let continues = self.heard_at.is_some_and(|at| at.checked_add(1) == Some(tick));
-        let read = if continues { peers & (changed | !self.heard_peers) } else { peers };
+        let read = if continues { peers & (flags_changed | !self.heard_peers) } else { peers };
         let read = read & low_bits(views.len().min(self.route_lens.len()));
         let changed = if read == 0 { false } else { self.take_in(read, views)? };
         self.heard_at = Some(tick);
