@@ -87,7 +87,10 @@ impl Snapshot {
         check("communication mode", self.comm.name(), comm.name())?;
         check("agent slot", &self.slot.to_string(), &agent.slot().to_string())?;
         check("tree", &self.tree, tree)?;
-        for table in &self.tables {
+        for (i, table) in self.tables.iter().enumerate() {
+            table.check().map_err(|e| {
+                SnapshotError::Inconsistent(format!("learning selector {}: {e}", i + 1))
+            })?;
             if table.n_rows() > self.states.len() {
                 return Err(SnapshotError::Inconsistent(format!(
                     "a table has {} rows for {} states",
@@ -371,6 +374,25 @@ mod tests {
         assert!(read.states.is_empty(), "the torn write was read");
         std::fs::remove_file(&path).unwrap();
         assert!(read_snapshot(&path).unwrap().is_none(), "a torn first snapshot counts as none");
+    }
+
+    #[test]
+    fn a_snapshot_holding_a_non_finite_q_value_is_refused() {
+        let mut agent = uav1();
+        learn_one_state(&mut agent);
+        let mut snapshot = Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let mut table = QTable::new(5);
+        table.step(0, 3, f64::NAN, 1.0);
+        snapshot.tables = vec![table];
+        let err = snapshot
+            .restore(&mut agent.trials_mut()[0], "s3", CommMode::Flags, "tree")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "inconsistent snapshot: learning selector 1: Q(state 0, child 4) is NaN; \
+             Q-values are finite"
+        );
     }
 
     #[test]
