@@ -43,12 +43,10 @@ pub enum SnapshotError {
     Mismatch { what: &'static str, found: String, expected: String },
     #[error("inconsistent snapshot: {0}")]
     Inconsistent(String),
-    #[error("{path}: {source}")]
-    File {
-        path: String,
-        #[source]
-        source: Box<SnapshotError>,
-    },
+    /// The error of one file. Its cause is in the message, not also a `source`: error
+    /// reports that follow the chain would print it twice.
+    #[error("{path}: {cause}")]
+    File { path: String, cause: Box<SnapshotError> },
     #[error("cannot read {path}: {source}")]
     Io { path: String, source: std::io::Error },
 }
@@ -221,7 +219,7 @@ pub fn read_snapshot(path: &Path) -> Result<Option<Snapshot>, SnapshotError> {
 
 /// Names the file an error is about.
 fn in_file(path: &Path) -> impl FnOnce(SnapshotError) -> SnapshotError + '_ {
-    move |source| SnapshotError::File { path: path.display().to_string(), source: Box::new(source) }
+    move |cause| SnapshotError::File { path: path.display().to_string(), cause: Box::new(cause) }
 }
 
 /// Writes the snapshot of every trial of `agent` under `out` (by whoever owns the agent:

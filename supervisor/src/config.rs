@@ -2,7 +2,7 @@
 
 use crate::cli::{Restart, RunArgs, Transport};
 use anyhow::{bail, Context, Result};
-use flockstep_agents::agent::AgentSpec;
+use flockstep_agents::agent::{AgentSpec, UavAgent};
 use flockstep_agents::bt::render::to_text;
 use flockstep_agents::bt::spec::TreeSpec;
 use flockstep_agents::bt::tree::Tree;
@@ -95,7 +95,7 @@ impl RunConfig {
         flockstep_proto::services::validate_run_id(&run_id)
             .map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
         let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(&run_id));
-        Ok(RunConfig {
+        let config = RunConfig {
             scenario_arg,
             scenario: Arc::new(scenario),
             bt_path: args.bt.clone(),
@@ -118,16 +118,16 @@ impl RunConfig {
             run_id,
             quiet: args.quiet,
             trace_dir: args.trace_dir.clone(),
-            resume: args
-                .resume
-                .as_ref()
-                .map(|dir| check_snapshots(dir, args.uavs, args.trials))
-                .transpose()?,
+            resume: args.resume.clone(),
             agent_timeout_ms: args.agent_timeout_ms,
             restart: args.restart,
             snapshot_every: args.snapshot_every,
             faults: parse_faults(&args.faults, args.uavs)?,
-        })
+        };
+        if let Some(dir) = &config.resume {
+            check_snapshots(&config, dir)?;
+        }
+        Ok(config)
     }
 
     /// The spec of agent `slot`, as the in-process runner and the agent process build it.
@@ -170,24 +170,27 @@ pub fn default_comm(uavs: usize) -> CommMode {
     }
 }
 
-/// Checks that `dir` holds a readable snapshot for every agent and trial; returns `dir`.
-/// Whether each fits the run (scenario, tree, communication) is checked when it is loaded.
-fn check_snapshots(dir: &std::path::Path, uavs: usize, trials: usize) -> Result<PathBuf> {
-    use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
-    for slot in 0..uavs {
-        for trial in 0..trials {
-            let path = snapshot_path(dir, slot, trial);
-            let found =
-                read_snapshot(&path).with_context(|| format!("--resume: {}", dir.display()))?;
-            anyhow::ensure!(
-                found.is_some(),
+/// Checks that `dir` holds, for every agent and trial, a snapshot this run can load. Each is
+/// loaded into a fresh copy of its agent, as the in-process runner and the agent process load
+/// it (scenario, slot, communication mode, tree and tables checked), so a bad one is refused
+/// here, before any process starts, and not by an agent process that then dies mid-run.
+fn check_snapshots(config: &RunConfig, dir: &std::path::Path) -> Result<()> {
+    use flockstep_agents::snapshot::{restore_snapshots, snapshot_path};
+    let tree = config.tree_text();
+    for slot in 0..config.uavs {
+        let mut agent = UavAgent::new(&config.agent_spec(slot))?;
+        let missing =
+            restore_snapshots(&mut agent, dir, config.scenario.name(), config.comm, &tree)
+                .with_context(|| format!("--resume: {}", dir.display()))?;
+        if let Some(&trial) = missing.first() {
+            bail!(
                 "--resume: no snapshot {} (UAV{}, trial {trial})",
-                path.display(),
+                snapshot_path(dir, slot, trial).display(),
                 slot + 1
             );
         }
     }
-    Ok(dir.to_path_buf())
+    Ok(())
 }
 
 /// `N=SPEC` pairs (N 1-based) into (slot, SPEC); the agent checks SPEC itself.

@@ -2,8 +2,9 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    episode_rows, number, run_ok, scratch, summary, supervise, words, SUPERVISOR,
+    episode_rows, number, run_fail, run_ok, scratch, summary, supervise, words, SUPERVISOR,
 };
+use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 
 #[test]
 fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
@@ -84,4 +85,42 @@ fn resume_continues_from_the_learned_level() {
         resumed < 20.0 && resumed < scratch_mean / 2.0,
         "resumed {resumed} vs from scratch {scratch_mean}"
     );
+}
+
+/// A snapshot is checked by the supervisor before any process starts: one error line that
+/// names the file and what is wrong, on both transports (over shared memory it used to be an
+/// agent dying mid-run and the world failing for want of agents).
+#[test]
+fn a_snapshot_that_does_not_fit_the_run_is_refused_in_one_line_before_it_starts() {
+    let dir = scratch();
+    supervise(
+        dir.path(),
+        &words("--transport inproc --scenario s1 --uavs 1 --trials 1 --episodes 50"),
+    );
+    let qtables = dir.path().display().to_string();
+    // `out` would hold the processes' logs had any started.
+    let refused = |args: &[&str], out: &str, expected: &[&str]| {
+        let (failed, report) = run_fail(SUPERVISOR, args);
+        let stderr = String::from_utf8_lossy(&failed.stderr).trim().to_string();
+        assert_eq!(stderr.lines().count(), 1, "{report}");
+        assert!(expected.iter().all(|e| stderr.contains(e)), "{report}");
+        assert!(!std::path::Path::new(out).join("logs").exists(), "a process started\n{report}");
+    };
+    for transport in ["inproc", "shm"] {
+        let out = dir.path().join(format!("other-{transport}")).display().to_string();
+        let args = ["--scenario", "s2", "--uavs", "1", "--trials", "1", "--episodes", "5"];
+        let rest = ["--resume", &qtables, "--transport", transport, "--out", &out, "--quiet"];
+        let expected = ["uav1_trial0.bin", "learned with scenario"];
+        refused(&[&args[..], &rest].concat(), &out, &expected);
+    }
+    let path = snapshot_path(dir.path(), 0, 0);
+    let mut snapshot = read_snapshot(&path).expect("readable").expect("the run saved trial 0");
+    snapshot.tables[0].step(0, 1, f64::NAN, 1.0);
+    let bytes = bincode::serde::encode_to_vec(&snapshot, bincode::config::standard()).unwrap();
+    std::fs::write(&path, bytes).unwrap();
+    for transport in ["inproc", "shm"] {
+        let out = dir.path().join(format!("eval-{transport}")).display().to_string();
+        let args = ["eval", "--qtables", &qtables, "--transport", transport, "--out", &out];
+        refused(&args, &out, &["uav1_trial0.bin", "Q(state 0, child 2) is NaN"]);
+    }
 }
