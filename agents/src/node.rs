@@ -104,11 +104,17 @@ pub struct AttachArgs {
 
 /// A test aid that makes the agent misbehave on purpose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Fault {
+pub enum Fault {
     CrashBeforeJoin,
     CrashAtRound(u64),
     HangAtRound(u64),
     IgnoreSigterm,
+}
+
+/// The faults of a `--fault` value: specs separated by commas. The supervisor checks its
+/// `--fault N=SPEC` with this before it starts any process.
+pub fn parse_faults(specs: &str) -> Result<Vec<Fault>> {
+    specs.split(',').map(parse_fault).collect()
 }
 
 fn parse_fault(spec: &str) -> Result<Fault> {
@@ -174,10 +180,7 @@ fn serve(
     learner: &LearnerArgs,
     out: &Path,
 ) -> Result<()> {
-    let faults = learner
-        .fault
-        .as_deref()
-        .map_or(Ok(Vec::new()), |f| f.split(',').map(parse_fault).collect())?;
+    let faults = learner.fault.as_deref().map_or(Ok(Vec::new()), parse_faults)?;
     let ports = RunServices::open(run)?.into_agent()?;
     if faults.contains(&Fault::IgnoreSigterm) {
         // SAFETY: setting a signal's disposition to "ignore".

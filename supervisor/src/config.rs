@@ -62,6 +62,15 @@ impl RunConfig {
         if args.tick_cap == 0 {
             bail!("--tick-cap must be at least 1");
         }
+        if args.eval_every > 0 && args.eval_block == 0 {
+            bail!("--eval-every {} needs an --eval-block of at least 1 episode", args.eval_every);
+        }
+        if args.smoothing == Some(0) {
+            bail!("--smoothing must be at least 1 episode");
+        }
+        if args.agent_timeout_ms == 0 {
+            bail!("--agent-timeout-ms must be at least 1: an agent silent that long in a round is dropped");
+        }
         let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs));
         let scenario =
             Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
@@ -193,7 +202,7 @@ fn check_snapshots(config: &RunConfig, dir: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
-/// `N=SPEC` pairs (N 1-based) into (slot, SPEC); the agent checks SPEC itself.
+/// `N=SPEC` pairs (N 1-based) into (slot, SPEC), SPEC checked by the agent's own parser.
 fn parse_faults(faults: &[String], uavs: usize) -> Result<Vec<(usize, String)>> {
     faults
         .iter()
@@ -207,6 +216,7 @@ fn parse_faults(faults: &[String], uavs: usize) -> Result<Vec<(usize, String)>> 
                 (1..=uavs).contains(&uav),
                 "--fault `{f}`: agent {uav} is not one of 1..={uavs}"
             );
+            flockstep_agents::node::parse_faults(spec)?;
             Ok((uav - 1, spec.to_string()))
         })
         .collect()

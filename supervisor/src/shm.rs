@@ -19,6 +19,7 @@ use flockstep_proto::transport::{
     cleanup_run, sweep_stale_runs, RunConfig as RunIdentity, RunServices, SignalMode,
     SupervisorPorts, TransportError,
 };
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -37,6 +38,9 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     }
     let logs = config.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
+    if let Some(dir) = &config.trace_dir {
+        create_trace_files(dir, config.uavs)?;
+    }
     let mut fleet =
         Fleet { config, processes: Vec::new(), slots: Vec::new(), restarts: vec![0; config.uavs] };
     fleet.processes.push(Process::spawn("world", world_command(config)?, &logs.join("world.log"))?);
@@ -218,13 +222,31 @@ fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Comman
         command.arg("--resume").arg(dir);
     }
     if let Some(dir) = &config.trace_dir {
-        command.arg("--trace").arg(dir.join(format!("uav{}.trace.csv", slot + 1)));
+        command.arg("--trace").arg(trace_path(dir, slot));
     }
     // A fault is injected once: a restarted agent behaves.
     if let Some((_, fault)) = config.faults.iter().find(|(s, _)| *s == slot).filter(|_| !resume) {
         command.args(["--fault", fault]);
     }
     Ok(command)
+}
+
+/// Where agent `slot` writes its `--trace-dir` trace.
+fn trace_path(dir: &Path, slot: usize) -> PathBuf {
+    dir.join(format!("uav{}.trace.csv", slot + 1))
+}
+
+/// Creates the (empty) trace files the agents will write, so a directory that cannot hold
+/// them is an error before any process starts rather than agents failing in the run.
+fn create_trace_files(dir: &Path, uavs: usize) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("--trace-dir: cannot create {}", dir.display()))?;
+    for slot in 0..uavs {
+        let path = trace_path(dir, slot);
+        std::fs::File::create(&path)
+            .with_context(|| format!("--trace-dir: cannot create {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// Opens the run once the world has created it; fails at once if the world dies first.

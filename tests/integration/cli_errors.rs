@@ -1,6 +1,7 @@
 //! Bad input (issue 3, acceptance 6): an unknown scenario, an unreadable tree, `--uavs 0`,
-//! more UAVs than routes, a results directory that cannot be written. Each gives one clear
-//! error line naming the problem and a non-zero exit, for both transports.
+//! more UAVs than routes, a results directory that cannot be written, settings that would
+//! make a run meaningless, bad test aids. Each gives one clear error line naming the problem
+//! and a non-zero exit, for both transports, before any process of the run starts.
 
 use crate::harness::{assert_nothing_left, run_fail, run_id, scratch, SUPERVISOR};
 
@@ -114,4 +115,36 @@ fn results_directory_that_cannot_be_written() {
     fails_on_both_transports(&out, &[], |line, transport| {
         assert!(line.contains("results directory") && line.contains(&out), "{line} ({transport})");
     });
+}
+
+#[test]
+fn settings_that_would_make_a_run_meaningless() {
+    for_both_transports(&["--agent-timeout-ms", "0"], &["--agent-timeout-ms must be at least 1"]);
+    for_both_transports(&["--smoothing", "0"], &["--smoothing must be at least 1"]);
+    for_both_transports(
+        &["--eval-every", "5", "--eval-block", "0"],
+        &["--eval-every 5 needs an --eval-block of at least 1"],
+    );
+}
+
+/// The hidden test aids are input too: a bad one is refused before any agent runs, not
+/// by an agent failing in the middle of the run.
+#[test]
+fn bad_test_aids_are_refused_before_the_run() {
+    for_both_transports(
+        &["--fault", "1=crash-at-round=soon"],
+        &["--fault", "`soon` is not a round"],
+    );
+    let dir = scratch();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, b"").expect("write a file");
+    let traces = file.join("traces").display().to_string();
+    let out = dir.path().join("out").display().to_string();
+    let id = run_id("bad-trace-dir");
+    let args =
+        ["--trace-dir", &traces, "--out", &out, "--episodes", "10", "--quiet", "--run-id", &id];
+    let line = error_line(&args);
+    assert!(line.contains("--trace-dir: cannot create") && line.contains(&traces), "{line}");
+    assert!(!dir.path().join("out").join("logs").join("world.log").exists(), "the world started");
+    assert_nothing_left(&id);
 }
