@@ -51,6 +51,7 @@ pub enum Command {
         /// The results directory of the run (its qtables/, summary.json, scenario.map, tree.bt).
         #[arg(long)]
         qtables: PathBuf,
+        /// Greedy episodes per trial (at least 1).
         #[arg(long, default_value_t = 1000)]
         episodes: u64,
         #[arg(long)]

@@ -63,6 +63,7 @@ pub fn eval(
     defaults: &crate::cli::RunArgs,
     stop: &std::sync::atomic::AtomicBool,
 ) -> Result<()> {
+    anyhow::ensure!(episodes > 0, "eval --episodes must be at least 1 (greedy episodes per trial)");
     let summary = crate::summary::summary_file(dir)?;
     let path = dir.join("summary.json");
     let number = |key: &str| {

@@ -125,6 +125,10 @@ fn settings_that_would_make_a_run_meaningless() {
         &["--eval-every", "5", "--eval-block", "0"],
         &["--eval-every 5 needs an --eval-block of at least 1"],
     );
+    let dir = scratch();
+    let line =
+        error_line(&["eval", "--qtables", &dir.path().display().to_string(), "--episodes", "0"]);
+    assert!(line.contains("eval --episodes must be at least 1"), "{line}");
 }
 
 /// The hidden test aids are input too: a bad one is refused before any agent runs, not
