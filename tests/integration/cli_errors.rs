@@ -3,17 +3,7 @@
 //! make a run meaningless, bad test aids. Each gives one clear error line naming the problem
 //! and a non-zero exit, for both transports, before any process of the run starts.
 
-use crate::harness::{assert_nothing_left, run_fail, run_id, scratch, SUPERVISOR};
-
-/// Runs the supervisor expecting failure; returns its stderr, checked to be one line.
-fn error_line(args: &[&str]) -> String {
-    let (out, report) = run_fail(SUPERVISOR, args);
-    let stderr = String::from_utf8_lossy(&out.stderr).trim().to_string();
-    assert_eq!(stderr.lines().count(), 1, "expected one error line\n{report}");
-    assert!(stderr.starts_with("supervisor: error: "), "{report}");
-    assert_eq!(out.status.code(), Some(1), "{report}");
-    stderr
-}
+use crate::harness::{assert_nothing_left, error_line, run_id, scratch};
 
 /// Runs the supervisor with `args` on both transports, results into `out`; `check` looks at
 /// the error line. Nothing of the run may be left behind.

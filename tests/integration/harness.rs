@@ -54,6 +54,17 @@ pub fn run_fail(program: &str, args: &[&str]) -> (Output, String) {
     (out, report)
 }
 
+/// Runs the supervisor expecting failure; returns its stderr, checked to be one error line
+/// and exit status 1.
+pub fn error_line(args: &[&str]) -> String {
+    let (out, report) = run_fail(SUPERVISOR, args);
+    let stderr = String::from_utf8_lossy(&out.stderr).trim().to_string();
+    assert_eq!(stderr.lines().count(), 1, "expected one error line\n{report}");
+    assert!(stderr.starts_with("supervisor: error: "), "{report}");
+    assert_eq!(out.status.code(), Some(1), "{report}");
+    stderr
+}
+
 /// Runs the supervisor with `args` plus `--out DIR --quiet`, returns DIR's summary.json.
 pub fn supervise(out: &Path, args: &[&str]) -> Value {
     let out_arg = out.display().to_string();
