@@ -102,6 +102,8 @@ impl Fleet<'_> {
         let mut control = Control::default();
         let mut notes = Vec::new();
         let mut reported = vec![false; self.processes.len()];
+        // Named when the world fails: its "every agent is gone" says nothing of why.
+        let mut first_failure: Option<String> = None;
         loop {
             while let Some(report) = ports.try_episode()? {
                 recorder.record(&report)?;
@@ -116,29 +118,21 @@ impl Fleet<'_> {
                     recorder.record(&report)?;
                 }
                 if !status.success() {
+                    // An agent may have failed since the last look, and be why the world did.
+                    let late = self.newly_failed_agents(&mut reported)?;
+                    let first = first_failure.or_else(|| late.first().map(|(_, n)| n.clone()));
+                    let cause = first.map_or_else(String::new, |n| format!("; first to fail: {n}"));
                     bail!(
-                        "the world process failed ({status}): {}",
+                        "the world process failed ({status}): {}{cause}",
                         self.processes[0].last_words()
                     );
                 }
                 return Ok(Outcome { complete: control.stop == 0, notes, peak_rss_kib: vec![] });
             }
-            reported.resize(self.processes.len(), false);
-            let mut failed = Vec::new();
-            for (i, process) in self.processes.iter_mut().enumerate().skip(1) {
-                let Some(status) = process.status()? else { continue };
-                if !status.success() && !reported[i] {
-                    reported[i] = true;
-                    failed.push((
-                        self.slots[i],
-                        format!("{} failed ({status}): {}", process.name, process.last_words()),
-                    ));
-                }
-            }
-            for (slot, note) in failed {
+            for (slot, note) in self.newly_failed_agents(&mut reported)? {
+                first_failure.get_or_insert_with(|| note.clone());
                 tracing::warn!("{note}; the run goes on without it");
                 notes.push(note);
-                let slot = slot.expect("agent processes serve a slot");
                 if self.config.restart == Restart::OnFailure
                     && control.stop == 0
                     && self.restarts[slot] < MAX_RESTARTS
@@ -155,6 +149,25 @@ impl Fleet<'_> {
             // the CPU dozens of times per record, CPU the world and the agents need.
             ports.waiter().sleep(DRAIN_EVERY)?;
         }
+    }
+
+    /// The agent processes that failed since the last call (`reported` marks those already
+    /// returned), with their slot and a note naming the process, its exit and last words.
+    fn newly_failed_agents(&mut self, reported: &mut Vec<bool>) -> Result<Vec<(usize, String)>> {
+        reported.resize(self.processes.len(), false);
+        let mut failed = Vec::new();
+        for (i, process) in self.processes.iter_mut().enumerate().skip(1) {
+            let Some(status) = process.status()? else { continue };
+            if !status.success() && !reported[i] {
+                reported[i] = true;
+                let slot = self.slots[i].expect("agent processes serve a slot");
+                failed.push((
+                    slot,
+                    format!("{} failed ({status}): {}", process.name, process.last_words()),
+                ));
+            }
+        }
+        Ok(failed)
     }
 }
 

@@ -153,6 +153,36 @@ fn an_agent_that_dies_before_joining_does_not_hold_up_the_run() {
     assert_nothing_left(&id);
 }
 
+/// When every agent fails, the world's own error ("every agent is gone") says nothing of why:
+/// the supervisor's error names the first agent to fail, and the results are still written.
+#[test]
+fn when_every_agent_fails_the_error_names_the_first_one_and_why() {
+    for (fault, world_says) in [
+        ("crash-before-join", "every starting agent ended before it asked to join"),
+        ("crash-at-round=5", "every agent is gone"),
+    ] {
+        let dir = scratch();
+        let (id, out) = (run_id("allfail"), dir.path().display().to_string());
+        let faults = [format!("1={fault}"), format!("2={fault}")];
+        let extra = words("--scenario s3 --uavs 2 --episodes 500 --trials 1 --seed 53");
+        let extra = [&extra[..], &["--fault", &faults[0], "--fault", &faults[1]]].concat();
+        let run = Supervised::start(&run_args(&id, &out, &extra));
+        let (status, report) = run.finish(DEADLOCK);
+        assert_eq!(status.status.code(), Some(1), "{fault}: {report}");
+        let stderr = String::from_utf8_lossy(&status.stderr);
+        let last = stderr.lines().last().unwrap_or_default();
+        assert!(last.starts_with("supervisor: error: the world process failed"), "{fault}: {last}");
+        assert!(last.contains(world_says), "{fault}: {last}");
+        assert!(
+            last.contains("first to fail: UAV") && last.contains("SIGABRT"),
+            "{fault}: the agents' failure is not named: {last}"
+        );
+        let s = summary(dir.path());
+        assert_eq!(s["complete"], false, "{fault}: {s:#}");
+        assert_nothing_left(&id);
+    }
+}
+
 #[test]
 fn a_restarted_agent_goes_on_from_its_snapshot() {
     let dir = scratch();
