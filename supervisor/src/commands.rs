@@ -10,7 +10,7 @@ use std::path::Path;
 /// Prints the exact optimal expected episode length of each route flown alone, and the
 /// optimal path.
 pub fn optimum(spec: &str) -> Result<()> {
-    let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+    let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
     for uav in 0..scenario.n_routes() {
         let best = memoryless_optimum(&scenario, uav)
             .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
@@ -66,6 +66,13 @@ pub fn eval(
     anyhow::ensure!(episodes > 0, "eval --episodes must be at least 1 (greedy episodes per trial)");
     let summary = crate::summary::summary_file(dir)?;
     let path = dir.join("summary.json");
+    for file in ["scenario.map", "tree.bt"] {
+        anyhow::ensure!(
+            dir.join(file).is_file(),
+            "eval --qtables {}: no {file} (a finished run's results directory has one)",
+            dir.display()
+        );
+    }
     let number = |key: &str| {
         summary[key].as_u64().with_context(|| format!("{}: no number `{key}`", path.display()))
     };
@@ -91,7 +98,7 @@ pub fn eval(
         run_id: None,
         ..defaults.clone()
     };
-    let config = crate::config::RunConfig::resolve(&args)?;
+    let config = crate::config::RunConfig::resolve_resuming_as(&args, "eval --qtables")?;
     let outcome = crate::run::run_experiment(&config, stop)?;
     let result = crate::summary::summary_file(&config.out)?;
     for (agent, length) in

@@ -47,6 +47,12 @@ pub struct RunConfig {
 
 impl RunConfig {
     pub fn resolve(args: &RunArgs) -> Result<RunConfig> {
+        RunConfig::resolve_resuming_as(args, "--resume")
+    }
+
+    /// As [`RunConfig::resolve`], with `resume_flag` naming where `args.resume` came from in
+    /// the errors of its snapshots (`eval` reads a finished run's through it).
+    pub fn resolve_resuming_as(args: &RunArgs, resume_flag: &str) -> Result<RunConfig> {
         if args.uavs == 0 {
             bail!("--uavs must be at least 1");
         }
@@ -73,7 +79,7 @@ impl RunConfig {
         }
         let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs));
         let scenario =
-            Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+            Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
         if args.uavs > scenario.n_routes() {
             bail!(
                 "--uavs {} but scenario `{}` has only {} route(s); use a scenario with more routes",
@@ -134,7 +140,7 @@ impl RunConfig {
             faults: parse_faults(&args.faults, args.uavs)?,
         };
         if let Some(dir) = &config.resume {
-            check_snapshots(&config, dir)?;
+            check_snapshots(&config, dir, resume_flag)?;
         }
         Ok(config)
     }
@@ -183,17 +189,18 @@ pub fn default_comm(uavs: usize) -> CommMode {
 /// loaded into a fresh copy of its agent, as the in-process runner and the agent process load
 /// it (scenario, slot, communication mode, tree and tables checked), so a bad one is refused
 /// here, before any process starts, and not by an agent process that then dies mid-run.
-fn check_snapshots(config: &RunConfig, dir: &std::path::Path) -> Result<()> {
+fn check_snapshots(config: &RunConfig, dir: &std::path::Path, flag: &str) -> Result<()> {
     use flockstep_agents::snapshot::{restore_snapshots, snapshot_path};
     let tree = config.tree_text();
     for slot in 0..config.uavs {
         let mut agent = UavAgent::new(&config.agent_spec(slot))?;
         let missing =
             restore_snapshots(&mut agent, dir, config.scenario.name(), config.comm, &tree)
-                .with_context(|| format!("--resume: {}", dir.display()))?;
+                .with_context(|| format!("{flag} {}", dir.display()))?;
         if let Some(&trial) = missing.first() {
             bail!(
-                "--resume: no snapshot {} (UAV{}, trial {trial})",
+                "{flag} {}: no snapshot {} (UAV{}, trial {trial})",
+                dir.display(),
                 snapshot_path(dir, slot, trial).display(),
                 slot + 1
             );

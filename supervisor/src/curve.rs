@@ -47,9 +47,12 @@ pub fn moving_average(values: &[f64], window: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Writes `curve.csv`: `episode,agent,mean_length,smoothed_length`.
+/// The first line of a `curve.csv`.
+const CURVE_HEADER: &str = "episode,agent,mean_length,smoothed_length";
+
+/// Writes `curve.csv`: [`CURVE_HEADER`], then one row per agent and episode.
 pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
-    let mut text = String::from("episode,agent,mean_length,smoothed_length\n");
+    let mut text = format!("{CURVE_HEADER}\n");
     for curve in curves {
         for (e, (mean, smooth)) in curve.mean.iter().zip(&curve.smoothed).enumerate() {
             writeln!(text, "{e},{},{mean:.4},{smooth:.4}", curve.agent)
@@ -76,19 +79,20 @@ pub fn write_greedy_csv(path: &Path, greedy: &[Vec<(u64, f64, u64)>]) -> Result<
 pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let header = text.lines().next().unwrap_or_default();
+    anyhow::ensure!(
+        header.trim_end() == CURVE_HEADER,
+        "{}:1: not a curve.csv: expected the header `{CURVE_HEADER}`, found `{header}`",
+        path.display()
+    );
     let mut values = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let fields: Vec<&str> = line.split(',').collect();
         let parse = || -> Option<(usize, f64)> {
             Some((fields.get(1)?.parse().ok()?, fields.get(3)?.parse().ok()?))
         };
-        let (row_agent, smoothed) = parse().with_context(|| {
-            format!(
-                "{}:{}: expected episode,agent,mean_length,smoothed_length",
-                path.display(),
-                i + 1
-            )
-        })?;
+        let (row_agent, smoothed) = parse()
+            .with_context(|| format!("{}:{}: expected {CURVE_HEADER}", path.display(), i + 1))?;
         if row_agent == agent {
             values.push(smoothed);
         }
@@ -105,6 +109,28 @@ mod tests {
     fn moving_average_is_trailing_and_starts_with_partial_windows() {
         assert_eq!(moving_average(&[2.0, 4.0, 6.0, 8.0], 2), vec![2.0, 3.0, 5.0, 7.0]);
         assert_eq!(moving_average(&[1.0, 2.0, 3.0], 1), vec![1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_written_curve_reads_back_and_other_files_are_refused_with_their_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("curve.csv");
+        let c = curves(&[vec![vec![4, 2]], vec![vec![9, 7]]], 2);
+        write_csv(&path, &c).unwrap();
+        assert_eq!(read_smoothed(&path, 2).unwrap(), vec![9.0, 8.0]);
+        let refused = |text: &str| {
+            std::fs::write(&path, text).unwrap();
+            read_smoothed(&path, 1).unwrap_err().to_string()
+        };
+        let e = refused("a hostname\n");
+        assert!(e.ends_with("curve.csv:1: not a curve.csv: expected the header `episode,agent,mean_length,smoothed_length`, found `a hostname`"), "{e}");
+        let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n1,one,2,3\n"));
+        assert!(
+            e.ends_with("curve.csv:3: expected episode,agent,mean_length,smoothed_length"),
+            "{e}"
+        );
+        let e = refused(&format!("{CURVE_HEADER}\n0,2,4,4\n"));
+        assert!(e.ends_with("curve.csv: no rows for agent 1"), "{e}");
     }
 
     #[test]

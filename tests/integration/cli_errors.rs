@@ -40,7 +40,7 @@ fn for_both_transports(args: &[&str], expected: &[&str]) {
 
 #[test]
 fn unknown_scenario() {
-    for_both_transports(&["--scenario", "s9"], &["s9"]);
+    for_both_transports(&["--scenario", "s9"], &["unknown scenario `s9`", "s1, s2, s3, s4"]);
 }
 
 #[test]

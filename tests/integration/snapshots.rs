@@ -108,7 +108,7 @@ fn a_snapshot_that_does_not_fit_the_run_is_refused_in_one_line_before_it_starts(
         let out = dir.path().join(format!("other-{transport}")).display().to_string();
         let args = ["--scenario", "s2", "--uavs", "1", "--trials", "1", "--episodes", "5"];
         let rest = ["--resume", &qtables, "--transport", transport, "--out", &out, "--quiet"];
-        let expected = ["uav1_trial0.bin", "learned with scenario"];
+        let expected = ["--resume", "uav1_trial0.bin", "learned with scenario"];
         refused(&[&args[..], &rest].concat(), &out, &expected);
     }
     let path = snapshot_path(dir.path(), 0, 0);
@@ -119,6 +119,15 @@ fn a_snapshot_that_does_not_fit_the_run_is_refused_in_one_line_before_it_starts(
     for transport in ["inproc", "shm"] {
         let out = dir.path().join(format!("eval-{transport}")).display().to_string();
         let args = ["eval", "--qtables", &qtables, "--transport", transport, "--out", &out];
-        refused(&args, &out, &["uav1_trial0.bin", "Q(state 0, child 2) is NaN"]);
+        // Named by the eval's own flag: the user gave no --resume.
+        let expected = ["error: eval --qtables", "uav1_trial0.bin", "Q(state 0, child 2) is NaN"];
+        refused(&args, &out, &expected);
     }
+    let out = dir.path().join("eval-missing").display().to_string();
+    let args = ["eval", "--qtables", &qtables, "--out", &out];
+    std::fs::remove_file(&path).unwrap();
+    let expected = ["error: eval --qtables", "no snapshot", "uav1_trial0.bin (UAV1, trial 0)"];
+    refused(&args, &out, &expected);
+    std::fs::remove_file(dir.path().join("tree.bt")).unwrap();
+    refused(&args, &out, &["error: eval --qtables", "no tree.bt"]);
 }

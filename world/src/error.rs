@@ -82,6 +82,12 @@ pub enum MapErrorKind {
 pub enum WorldError {
     #[error("cannot read {}: {source}", .path.display())]
     Io { path: PathBuf, source: std::io::Error },
+    /// A `--scenario` that is neither a built-in name, nor a `gen:` spec, nor an existing file.
+    #[error(
+        "unknown scenario `{spec}`: expected s1, s2, s3, s4, a `gen:` spec or the path of a \
+         .map file, and there is no file `{spec}`"
+    )]
+    UnknownScenario { spec: String },
     #[error(transparent)]
     Map(#[from] MapError),
     /// An `expect` line does not hold; `actual` lists the poses that do see the target.

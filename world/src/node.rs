@@ -88,7 +88,7 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         exit_with_parent(parent)?;
     }
     let scenario =
-        Scenario::resolve(&args.scenario).map_err(|e| anyhow::anyhow!("scenario: {e}"))?;
+        Scenario::resolve(&args.scenario).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
     let config = EpisodeConfig {
         train_episodes: args.episodes,
         eval_episodes: args.eval_episodes,

@@ -83,7 +83,12 @@ impl Scenario {
         if crate::generate::GenSpec::is_gen(spec) {
             return crate::generate::generate(spec);
         }
-        Scenario::load(Path::new(spec))
+        Scenario::load(Path::new(spec)).map_err(|e| match e {
+            WorldError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+                WorldError::UnknownScenario { spec: spec.to_string() }
+            }
+            e => e,
+        })
     }
 
     fn build(source: &str, map: MapFile, source_text: String) -> Result<Scenario, WorldError> {

@@ -140,7 +140,7 @@ fn the_supervisor_default_lets_every_uav_see_every_target() {
 fn the_builtin_maps_and_files_still_resolve() {
     assert_eq!(resolved("s3").n_routes(), 2);
     let err = Scenario::resolve("no/such/file.map").expect_err("missing file");
-    assert!(matches!(err, WorldError::Io { .. }), "{err}");
+    assert!(matches!(err, WorldError::UnknownScenario { .. }), "{err}");
 }
 
 #[test]

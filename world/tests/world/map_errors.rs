@@ -284,9 +284,16 @@ fn errors_carry_their_position_and_kind() {
 }
 
 #[test]
-fn a_missing_file_names_its_path() {
+fn a_missing_file_is_an_unknown_scenario_that_names_its_path() {
     let message = Scenario::resolve("no/such/file.map").expect_err("refused").to_string();
-    assert!(message.starts_with("cannot read no/such/file.map: "), "{message}");
+    assert!(
+        message.starts_with("unknown scenario `no/such/file.map`: expected s1, s2, s3, s4, "),
+        "{message}"
+    );
+    assert!(message.ends_with("there is no file `no/such/file.map`"), "{message}");
+    // A file that exists but cannot be read is named as such.
+    let message = Scenario::resolve("/").expect_err("a directory").to_string();
+    assert!(message.starts_with("cannot read /: "), "{message}");
 }
 
 proptest! {
