@@ -8,11 +8,11 @@ out=${1:-results/report}
 mkdir -p "$out" docs/results
 cargo build --release --bins
 sup=target/release/supervisor
-run() { local name=$1; shift; echo "== $name: supervisor $*" >&2; "$sup" --quiet --out "$out/$name" "$@" >/dev/null; }
+run() { local name=$1; shift; echo "== $name: supervisor $*" >&2; "$sup" --quiet --overwrite --out "$out/$name" "$@" >/dev/null; }
 
 # Thesis figures (4 trials, 50 000 episodes each, multi-process).
-"$sup" reproduce fig10 --out "$out/fig10" | tee "$out/fig10.txt"
-"$sup" reproduce fig11 --out "$out/fig11" | tee "$out/fig11.txt"
+"$sup" reproduce fig10 --overwrite --out "$out/fig10" | tee "$out/fig10.txt"
+"$sup" reproduce fig11 --overwrite --out "$out/fig11" | tee "$out/fig11.txt"
 
 # Communication modes on s3, with periodic greedy evaluation.
 for comm in none flags compact; do

@@ -159,6 +159,10 @@ pub struct RunArgs {
     /// Results directory [default: results/<run-id>].
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Replace the results of an earlier run in `--out` (without it such a directory is
+    /// refused, so that no finished run is lost by a repeated command).
+    #[arg(long, global = true)]
+    pub overwrite: bool,
     #[arg(long, value_enum, default_value_t = Transport::Shm)]
     pub transport: Transport,
     /// Run id naming the run's shared-memory services [default: derived from pid and time].

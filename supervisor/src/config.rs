@@ -12,7 +12,7 @@ use flockstep_agents::uav::load_uav_tree;
 use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
 use flockstep_world::scenario::Scenario;
 use flockstep_world::sim::EpisodeConfig;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Everything a run needs, validated.
@@ -32,6 +32,8 @@ pub struct RunConfig {
     pub seed: u64,
     pub smoothing: usize,
     pub out: PathBuf,
+    /// `out` may hold an earlier run's results, which the run removes first.
+    pub overwrite: bool,
     pub transport: Transport,
     pub run_id: String,
     pub quiet: bool,
@@ -110,6 +112,7 @@ impl RunConfig {
         flockstep_proto::services::validate_run_id(&run_id)
             .map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
         let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(&run_id));
+        check_out_dir(&out, args.overwrite, args.resume.as_deref())?;
         let config = RunConfig {
             scenario_arg,
             scenario: Arc::new(scenario),
@@ -132,6 +135,7 @@ impl RunConfig {
             transport: args.transport,
             run_id,
             quiet: args.quiet,
+            overwrite: args.overwrite,
             trace_dir: args.trace_dir.clone(),
             resume: args.resume.clone(),
             agent_timeout_ms: args.agent_timeout_ms,
@@ -205,6 +209,27 @@ fn check_snapshots(config: &RunConfig, dir: &std::path::Path, flag: &str) -> Res
                 slot + 1
             );
         }
+    }
+    Ok(())
+}
+
+/// Refuses an `out` that holds an earlier run's results unless `overwrite`, and an
+/// `overwrite` that would remove the snapshots `resume` starts from.
+fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<()> {
+    let Some(found) = crate::results::earlier_results(out) else { return Ok(()) };
+    if !overwrite {
+        bail!(
+            "--out {}: holds the results of an earlier run ({found}); choose another \
+             directory, or --overwrite to replace them",
+            out.display()
+        );
+    }
+    let same = |a: &Path, b: &Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b);
+    if let Some(resume) = resume.filter(|r| same(r, out)) {
+        bail!(
+            "--overwrite: --resume {} is the results directory it would replace; give another --out",
+            resume.display()
+        );
     }
     Ok(())
 }

@@ -13,6 +13,43 @@ use std::path::Path;
 
 const CSV_HEADER: &str = "trial,agent,episode,start_tick,length,truncated\n";
 
+/// Everything a run writes into its results directory, and `eval/`, where `eval` writes by
+/// default. `--overwrite` removes these (and nothing else) before the new run starts.
+pub const RUN_OUTPUTS: [&str; 11] = [
+    "summary.json",
+    "episodes.csv",
+    "greedy_episodes.csv",
+    "curve.csv",
+    "greedy_curve.csv",
+    "curve.svg",
+    "scenario.map",
+    "tree.bt",
+    "qtables",
+    "logs",
+    "eval",
+];
+
+/// The file that shows `dir` holds an earlier run's results, if it does: every run writes
+/// `episodes.csv` at its start and `summary.json` at its end, even when stopped or failed.
+pub fn earlier_results(dir: &Path) -> Option<&'static str> {
+    ["summary.json", "episodes.csv"].into_iter().find(|file| dir.join(file).exists())
+}
+
+/// Removes what an earlier run wrote into `dir` ([`RUN_OUTPUTS`]).
+pub fn remove_earlier_results(dir: &Path) -> Result<()> {
+    for name in RUN_OUTPUTS {
+        let path = dir.join(name);
+        let removed = match std::fs::symlink_metadata(&path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => Err(e),
+            Ok(meta) if meta.is_dir() => std::fs::remove_dir_all(&path),
+            Ok(_) => std::fs::remove_file(&path),
+        };
+        removed.with_context(|| format!("--overwrite: cannot remove {}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// Greedy-evaluation totals of one agent over every trial.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct GreedyStats {

@@ -61,8 +61,12 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     result
 }
 
-/// Creates the results directory and checks it can be written, before any process starts.
+/// Creates the results directory (removing an earlier run's results there if asked to) and
+/// checks it can be written, before any process starts.
 fn prepare_out_dir(config: &RunConfig) -> Result<()> {
+    if config.overwrite {
+        crate::results::remove_earlier_results(&config.out)?;
+    }
     std::fs::create_dir_all(&config.out)
         .with_context(|| format!("cannot create results directory {}", config.out.display()))?;
     let probe = config.out.join(".write-test");

@@ -1,9 +1,12 @@
 //! Bad input (issue 3, acceptance 6): an unknown scenario, an unreadable tree, `--uavs 0`,
 //! more UAVs than routes, a results directory that cannot be written, settings that would
-//! make a run meaningless, bad test aids. Each gives one clear error line naming the problem
+//! make a run meaningless, bad test aids, a results directory that holds an earlier run. Each gives one clear error line naming the problem
 //! and a non-zero exit, for both transports, before any process of the run starts.
 
-use crate::harness::{assert_nothing_left, error_line, run_id, scratch};
+use crate::harness::{
+    assert_nothing_left, error_line, read, run_id, run_ok, scratch, words, SUPERVISOR,
+};
+use flockstep_supervisor::results::RUN_OUTPUTS;
 
 /// Runs the supervisor with `args` on both transports, results into `out`; `check` looks at
 /// the error line. Nothing of the run may be left behind.
@@ -107,6 +110,56 @@ fn results_directory_that_cannot_be_written() {
     });
 }
 
+/// A repeated command must not silently replace a finished run: `--out` holding one is
+/// refused unless `--overwrite`, which removes exactly what a run writes (a run's own
+/// listing is checked against that list) and never the snapshots `--resume` starts from.
+#[test]
+fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
+    let dir = scratch();
+    let out = dir.path().join("run");
+    let out_arg = out.display().to_string();
+    let run = |extra: &[&str]| -> Vec<String> {
+        let id = run_id("overwrite");
+        let common = ["--transport", "shm", "--out", &out_arg, "--quiet", "--run-id", &id];
+        words("--scenario s1 --uavs 1 --trials 1 --episodes 20 --eval-episodes 5")
+            .into_iter()
+            .chain(common)
+            .chain(extra.iter().copied())
+            .map(String::from)
+            .collect()
+    };
+    run_ok(SUPERVISOR, &as_strs(&run(&[])));
+    run_ok(SUPERVISOR, &["eval", "--qtables", &out_arg, "--episodes", "3"]);
+    let written: Vec<String> = std::fs::read_dir(&out)
+        .expect("the results directory")
+        .map(|e| e.expect("an entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    for name in &written {
+        assert!(RUN_OUTPUTS.contains(&name.as_str()), "`{name}` is not in RUN_OUTPUTS");
+    }
+    let episodes = read(&out.join("episodes.csv"));
+
+    let line = error_line(&as_strs(&run(&[])));
+    assert!(
+        line.contains(&format!("--out {out_arg}: holds the results of an earlier run")),
+        "{line}"
+    );
+    assert!(line.contains("--overwrite"), "{line}");
+    assert_eq!(read(&out.join("episodes.csv")), episodes, "the refused run changed the results");
+    let line = error_line(&as_strs(&run(&["--overwrite", "--resume", &out_arg])));
+    assert!(line.contains("is the results directory it would replace"), "{line}");
+    assert!(out.join("qtables").join("uav1_trial0.bin").exists(), "the snapshots were removed");
+
+    let stale = out.join("qtables").join("uav7_trial0.bin");
+    std::fs::write(&stale, b"from another run").unwrap();
+    std::fs::write(out.join("notes.txt"), b"the user's own").unwrap();
+    run_ok(SUPERVISOR, &as_strs(&run(&["--overwrite", "--seed", "2"])));
+    assert!(!stale.exists(), "an earlier run's snapshot was left beside the new ones");
+    assert!(!out.join("eval").exists(), "the earlier run's evaluation was left");
+    assert!(out.join("notes.txt").exists(), "a file no run writes was removed");
+    assert_ne!(read(&out.join("episodes.csv")), episodes, "not replaced by the seed-2 run");
+}
+
 #[test]
 fn settings_that_would_make_a_run_meaningless() {
     for_both_transports(&["--agent-timeout-ms", "0"], &["--agent-timeout-ms must be at least 1"]);
@@ -141,4 +194,8 @@ fn bad_test_aids_are_refused_before_the_run() {
     assert!(line.contains("--trace-dir: cannot create") && line.contains(&traces), "{line}");
     assert!(!dir.path().join("out").join("logs").join("world.log").exists(), "the world started");
     assert_nothing_left(&id);
+}
+
+fn as_strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
 }
