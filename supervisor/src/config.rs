@@ -193,7 +193,7 @@ pub fn default_comm(uavs: usize) -> CommMode {
 /// loaded into a fresh copy of its agent, as the in-process runner and the agent process load
 /// it (scenario, slot, communication mode, tree and tables checked), so a bad one is refused
 /// here, before any process starts, and not by an agent process that then dies mid-run.
-fn check_snapshots(config: &RunConfig, dir: &std::path::Path, flag: &str) -> Result<()> {
+fn check_snapshots(config: &RunConfig, dir: &Path, flag: &str) -> Result<()> {
     use flockstep_agents::snapshot::{restore_snapshots, snapshot_path};
     let tree = config.tree_text();
     for slot in 0..config.uavs {
@@ -224,8 +224,11 @@ fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<(
             out.display()
         );
     }
-    let same = |a: &Path, b: &Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b);
-    if let Some(resume) = resume.filter(|r| same(r, out)) {
+    let same_dir = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(resume) = resume.filter(|r| same_dir(r, out)) {
         bail!(
             "--overwrite: --resume {} is the results directory it would replace; give another --out",
             resume.display()

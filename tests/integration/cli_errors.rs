@@ -1,7 +1,8 @@
 //! Bad input (issue 3, acceptance 6): an unknown scenario, an unreadable tree, `--uavs 0`,
-//! more UAVs than routes, a results directory that cannot be written, settings that would
-//! make a run meaningless, bad test aids, a results directory that holds an earlier run. Each gives one clear error line naming the problem
-//! and a non-zero exit, for both transports, before any process of the run starts.
+//! more UAVs than routes, a results directory that cannot be written or that holds an
+//! earlier run, settings that would make a run meaningless, bad test aids. Each gives one
+//! clear error line naming the problem and a non-zero exit, for both transports, before any
+//! process of the run starts.
 
 use crate::harness::{
     assert_nothing_left, error_line, read, run_id, run_ok, scratch, words, SUPERVISOR,
