@@ -4,7 +4,9 @@
 //! scenario 3 with communication, `--uavs 1` scenario 2 without; `--scenario` picks any other
 //! map (s1, s2, s3 or a path).
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::parser::ValueSource;
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
+use std::ffi::OsString;
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
@@ -18,6 +20,25 @@ pub struct Cli {
     pub command: Option<Command>,
     #[command(flatten)]
     pub run: RunArgs,
+}
+
+impl Cli {
+    /// Parses the command line as `Cli::parse_from` does, and also returns the run flags
+    /// given on it (as typed, e.g. `--uavs`): a subcommand refuses those it would ignore
+    /// ([`Command::refuse_ignored_run_flags`]).
+    pub fn parse_noting_run_flags(args: impl IntoIterator<Item = OsString>) -> (Cli, Vec<String>) {
+        let matches = Cli::command().get_matches_from(args);
+        let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+        let top = Cli::command();
+        let given = top
+            .get_arguments()
+            .filter(|arg| {
+                matches.value_source(arg.get_id().as_str()) == Some(ValueSource::CommandLine)
+            })
+            .filter_map(|arg| arg.get_long().map(|long| format!("--{long}")))
+            .collect();
+        (cli, given)
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -44,6 +65,9 @@ pub enum Command {
         seed: u64,
         #[arg(long, value_enum, default_value_t = Transport::Shm)]
         transport: Transport,
+        /// Replace the results of earlier runs in `--out`.
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Evaluate the Q-tables of a finished run greedily (epsilon 0, no learning) on the
     /// same scenario, tree and seed; results go to `<DIR>/eval/` unless `--out` is given.
@@ -58,6 +82,9 @@ pub enum Command {
         out: Option<PathBuf>,
         #[arg(long, value_enum, default_value_t = Transport::Inproc)]
         transport: Transport,
+        /// Replace the results of an earlier evaluation in `--out`.
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Write a generated scenario (`gen:uavs=N,...`) as a .map file.
     Generate {
@@ -77,6 +104,66 @@ pub enum Command {
         #[arg(long, default_value = "Episode length vs iterations")]
         title: String,
     },
+}
+
+impl Command {
+    /// The subcommand as typed.
+    fn name(&self) -> &'static str {
+        match self {
+            Command::Optimum { .. } => "optimum",
+            Command::Reproduce { .. } => "reproduce",
+            Command::Eval { .. } => "eval",
+            Command::Generate { .. } => "generate",
+            Command::Plot { .. } => "plot",
+        }
+    }
+
+    /// Whether this subcommand takes `flag` from before its name. `reproduce` runs ordinary
+    /// runs but picks their scenario, UAVs, communication and directories itself; `eval`
+    /// takes the run's settings from its `summary.json`.
+    fn uses_run_flag(&self, flag: &str) -> bool {
+        /// How the processes of a run are watched.
+        const SUPERVISION: &[&str] = &["--quiet", "--agent-timeout-ms", "--restart", "--fault"];
+        /// How a run learns and is evaluated, whatever its scenario.
+        const LEARNING: &[&str] = &[
+            "--bt",
+            "--alpha",
+            "--gamma",
+            "--epsilon",
+            "--tick-cap",
+            "--eval-episodes",
+            "--eval-every",
+            "--eval-block",
+            "--smoothing",
+            "--snapshot-every",
+        ];
+        match self {
+            Command::Reproduce { .. } => SUPERVISION.contains(&flag) || LEARNING.contains(&flag),
+            Command::Eval { .. } => SUPERVISION.contains(&flag),
+            Command::Optimum { .. } | Command::Generate { .. } | Command::Plot { .. } => false,
+        }
+    }
+
+    /// Refuses a run flag given before this subcommand that it would silently ignore
+    /// (`supervisor --episodes 100 reproduce fig10` would run 50 000 episodes).
+    pub fn refuse_ignored_run_flags(&self, given: &[String]) -> anyhow::Result<()> {
+        let name = self.name();
+        let Some(ignored) = given.iter().find(|flag| !self.uses_run_flag(flag)) else {
+            return Ok(());
+        };
+        let takes_its_own = Cli::command().find_subcommand(name).is_some_and(|sub| {
+            sub.get_arguments().any(|arg| arg.get_long() == ignored.strip_prefix("--"))
+        });
+        if takes_its_own {
+            anyhow::bail!(
+                "{ignored} before `{name}` would be ignored: give it after `{name}` \
+                 (supervisor {name} ... {ignored} ...)"
+            )
+        }
+        anyhow::bail!(
+            "{ignored} is a flag of a run, which `{name}` does not use (see supervisor {name} --help)"
+        )
+    }
 }
 
 /// A figure of the thesis.
@@ -161,7 +248,7 @@ pub struct RunArgs {
     pub out: Option<PathBuf>,
     /// Replace the results of an earlier run in `--out` (without it such a directory is
     /// refused, so that no finished run is lost by a repeated command).
-    #[arg(long, global = true)]
+    #[arg(long)]
     pub overwrite: bool,
     #[arg(long, value_enum, default_value_t = Transport::Shm)]
     pub transport: Transport,

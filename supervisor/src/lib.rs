@@ -15,7 +15,6 @@ pub mod shm;
 pub mod summary;
 
 use anyhow::Result;
-use clap::Parser;
 use cli::{Cli, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -38,8 +37,8 @@ pub fn main() -> std::process::ExitCode {
         _ => {}
     }
     flockstep_proto::logging::init("warn");
-    let cli = Cli::parse_from(args);
-    match dispatch(cli) {
+    let (cli, run_flags) = Cli::parse_noting_run_flags(args);
+    match dispatch(cli, &run_flags) {
         Ok(code) => std::process::ExitCode::from(code),
         Err(e) => {
             eprintln!("supervisor: error: {e:#}");
@@ -48,20 +47,25 @@ pub fn main() -> std::process::ExitCode {
     }
 }
 
-fn dispatch(cli: Cli) -> Result<u8> {
+/// Runs what the command line asks for; `run_flags` are the run flags it gave.
+fn dispatch(cli: Cli, run_flags: &[String]) -> Result<u8> {
+    if let Some(command) = &cli.command {
+        command.refuse_ignored_run_flags(run_flags)?;
+    }
     match cli.command {
         Some(Command::Optimum { scenario }) => commands::optimum(&scenario).map(|()| 0),
         Some(Command::Plot { curves, out, title }) => {
             commands::plot(&curves, &out, &title).map(|()| 0)
         }
-        Some(Command::Eval { qtables, episodes, out, transport }) => {
+        Some(Command::Eval { qtables, episodes, out, transport, overwrite }) => {
             let stop = stop_on_ctrl_c()?;
-            commands::eval(&qtables, episodes, out, transport, &cli.run, &stop).map(|()| 0)
+            let defaults = cli::RunArgs { overwrite, ..cli.run };
+            commands::eval(&qtables, episodes, out, transport, &defaults, &stop).map(|()| 0)
         }
         Some(Command::Generate { spec, out }) => commands::generate(&spec, &out).map(|()| 0),
-        Some(Command::Reproduce { figure, out, episodes, trials, seed, transport }) => {
+        Some(Command::Reproduce { figure, out, episodes, trials, seed, transport, overwrite }) => {
             let stop = stop_on_ctrl_c()?;
-            let base = cli::RunArgs { episodes, trials, seed, transport, ..cli.run };
+            let base = cli::RunArgs { episodes, trials, seed, transport, overwrite, ..cli.run };
             let complete = reproduce::reproduce(figure, out, &base, &stop)?;
             Ok(if complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }

@@ -197,6 +197,44 @@ fn bad_test_aids_are_refused_before_the_run() {
     assert_nothing_left(&id);
 }
 
+/// A run flag before a subcommand that would ignore it is refused, not dropped: before,
+/// `--episodes 100 reproduce fig10` ran the 50 000 episodes of reproduce's own default.
+#[test]
+fn run_flags_a_subcommand_would_ignore_are_refused() {
+    let dir = scratch();
+    let out = dir.path().join("fig10").display().to_string();
+    let line = error_line(&["--episodes", "100", "reproduce", "fig10", "--out", &out]);
+    assert!(line.contains("--episodes before `reproduce` would be ignored"), "{line}");
+    assert!(line.contains("give it after `reproduce`"), "{line}");
+    let line = error_line(&["--uavs", "3", "optimum", "--scenario", "s1"]);
+    assert!(line.contains("--uavs is a flag of a run, which `optimum` does not use"), "{line}");
+    let line = error_line(&["--seed", "2", "eval", "--qtables", &out]);
+    assert!(line.contains("--seed is a flag of a run, which `eval` does not use"), "{line}");
+    assert!(!dir.path().join("fig10").exists(), "a refused command started a run");
+    // What a subcommand does use is still taken from before it.
+    let printed = run_ok(
+        SUPERVISOR,
+        &[
+            "--quiet",
+            "--tick-cap",
+            "50",
+            "reproduce",
+            "fig10",
+            "--episodes",
+            "20",
+            "--trials",
+            "1",
+            "--transport",
+            "inproc",
+            "--out",
+            &out,
+        ],
+    );
+    assert!(String::from_utf8_lossy(&printed.stdout).contains("fig10.svg"));
+    let summary = crate::harness::summary(&dir.path().join("fig10").join("s1"));
+    assert_eq!(summary["tick_cap"], 50, "{summary:#}");
+}
+
 fn as_strs(args: &[String]) -> Vec<&str> {
     args.iter().map(String::as_str).collect()
 }
