@@ -27,10 +27,10 @@ impl Cli {
     /// given on it (as typed, e.g. `--uavs`): a subcommand refuses those it would ignore
     /// ([`Command::refuse_ignored_run_flags`]).
     pub fn parse_noting_run_flags(args: impl IntoIterator<Item = OsString>) -> (Cli, Vec<String>) {
-        let matches = Cli::command().get_matches_from(args);
+        let command = Cli::command();
+        let matches = command.clone().get_matches_from(args);
         let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-        let top = Cli::command();
-        let given = top
+        let given = command
             .get_arguments()
             .filter(|arg| {
                 matches.value_source(arg.get_id().as_str()) == Some(ValueSource::CommandLine)
