@@ -2,7 +2,7 @@
 //! agent's `act`, the world's checks and steps, its episode reports. `throughput` measures
 //! the product over shared memory, where each agent shares its core with another process;
 //! this bench isolates the part that grows with the trials, which decides how far 4 trials
-//! per round outrun 1 (`docs/TRANSPORT.md`, "Where a round goes").
+//! per round outrun 1 (`docs/PERFORMANCE.md`, "Where a round goes").
 //!
 //! `cargo bench --bench round` times a round of s3 (2 UAVs, `flags`) at 1 and 4 trials,
 //! after 300 000 rounds of training so that tables and episode lengths are those of a run in

@@ -4,7 +4,7 @@
 //! action goes the other way. Every line the reader touches first is a cross-core miss,
 //! and the reader's code touches them one by one as it goes, so the misses queue up behind
 //! each other. Asking for all lines in use the moment the message arrives lets them load
-//! at once (`docs/TRANSPORT.md`, "Prefetching a round's messages", has the figures).
+//! at once (`docs/PERFORMANCE.md`, "Prefetching a round's messages", has the figures).
 
 /// Bytes per cache line on the machines this runs on.
 const LINE: usize = 64;

@@ -46,7 +46,7 @@ impl Default for WaitPolicy {
     /// at 1 trial but not at 4, where 32 made 4-trial runs 18% faster and left 8 agents
     /// as they were. Even so 0.6 to 1.6% of the rounds had a wait that blocked after a
     /// hold-up of a few µs, and those rounds took 3 to 12% of the run's time; yielding for
-    /// up to 200 µs cut them to 0.01 to 0.05% of the rounds (`docs/TRANSPORT.md`, "Yielding
+    /// up to 200 µs cut them to 0.01 to 0.05% of the rounds (`docs/PERFORMANCE.md`, "Yielding
     /// through hold-ups").
     fn default() -> Self {
         WaitPolicy {
