@@ -166,10 +166,6 @@ impl Observation {
         }
     }
 
-    pub fn is_live(&self, agent: usize) -> bool {
-        agent < MAX_AGENTS && self.live & (1u64 << agent) != 0
-    }
-
     /// Slots in use, as far as the message can hold them (a reader checks `n_slots` against
     /// what it expects; this never indexes past the arrays).
     #[inline]
