@@ -152,7 +152,7 @@ impl Action {
     }
 
     /// Starts loading the header and the trials in use, written on the agent's core: see
-    /// [`crate::prefetch`].
+    /// `proto/src/prefetch.rs`.
     #[inline]
     pub fn prefetch_used(&self) {
         let trials = (self.n_trials as usize).min(MAX_TRIALS);

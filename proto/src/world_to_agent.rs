@@ -189,7 +189,7 @@ impl Observation {
     }
 
     /// Starts loading the parts a reader of this round will touch (the header, the owners,
-    /// the trials and views in use), written on the world's core: see [`crate::prefetch`].
+    /// the trials and views in use), written on the world's core: see `proto/src/prefetch.rs`.
     #[inline]
     pub fn prefetch_used(&self) {
         let (trials, slots) = ((self.n_trials as usize).min(MAX_TRIALS), self.slots());

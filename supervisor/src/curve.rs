@@ -50,7 +50,7 @@ pub fn moving_average(values: &[f64], window: usize) -> Vec<f64> {
 /// The first line of a `curve.csv`.
 const CURVE_HEADER: &str = "episode,agent,mean_length,smoothed_length";
 
-/// Writes `curve.csv`: [`CURVE_HEADER`], then one row per agent and episode.
+/// Writes `curve.csv`: `CURVE_HEADER`, then one row per agent and episode.
 pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
     let mut text = format!("{CURVE_HEADER}\n");
     for curve in curves {

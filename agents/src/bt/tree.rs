@@ -13,7 +13,7 @@
 //! (Sequence / Fallback), `PAR` stops ticking a child once it finished and returns as soon as
 //! its threshold is met, `REPEAT` and `RETRY` loop within one tick while the child finishes.
 //! A node that was RUNNING and is not reached, or is preempted, is halted; halting an action
-//! resets its progress. The learning selector is described on [`Tree::tick_learning`].
+//! resets its progress. The learning selector is described on `Run::tick_learning`.
 
 use super::spec::{LeafId, NodeKind, NodeSpec, TreeSpec};
 use super::status::Status;
