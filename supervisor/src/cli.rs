@@ -4,6 +4,7 @@
 //! scenario 3 with communication, `--uavs 1` scenario 2 without; `--scenario` picks any other
 //! map (s1, s2, s3 or a path).
 
+use clap::error::{ContextKind, ContextValue, ErrorKind};
 use clap::parser::ValueSource;
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use std::ffi::OsString;
@@ -25,10 +26,20 @@ pub struct Cli {
 impl Cli {
     /// Parses the command line as `Cli::parse_from` does, and also returns the run flags
     /// given on it (as typed, e.g. `--uavs`): a subcommand refuses those it would ignore
-    /// ([`Command::refuse_ignored_run_flags`]).
-    pub fn parse_noting_run_flags(args: impl IntoIterator<Item = OsString>) -> (Cli, Vec<String>) {
+    /// ([`Command::refuse_ignored_run_flags`]). A run flag typed after a subcommand's name,
+    /// which clap finds unknown there, is refused with where it belongs.
+    pub fn parse_noting_run_flags(
+        args: impl IntoIterator<Item = OsString>,
+    ) -> anyhow::Result<(Cli, Vec<String>)> {
+        let args: Vec<OsString> = args.into_iter().collect();
         let command = Cli::command();
-        let matches = command.clone().get_matches_from(args);
+        let matches = match command.clone().try_get_matches_from(&args) {
+            Ok(matches) => matches,
+            Err(error) => match run_flag_after_subcommand(&command, &args, &error) {
+                Some(refusal) => return Err(refusal),
+                None => error.exit(),
+            },
+        };
         let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
         let given = command
             .get_arguments()
@@ -37,8 +48,65 @@ impl Cli {
             })
             .filter_map(|arg| arg.get_long().map(|long| format!("--{long}")))
             .collect();
-        (cli, given)
+        Ok((cli, given))
     }
+}
+
+/// If `error` is clap's "unexpected argument" for a run flag typed after a subcommand's
+/// name (`supervisor reproduce fig10 --quiet`), the refusal that says where it belongs. The
+/// subcommand is found by parsing again without the run flags typed after it.
+fn run_flag_after_subcommand(
+    command: &clap::Command,
+    args: &[OsString],
+    error: &clap::Error,
+) -> Option<anyhow::Error> {
+    let (mut rest, flag) = without_run_flag(command, args, error)?;
+    loop {
+        match Cli::try_parse_from(&rest) {
+            Ok(cli) => return Some(cli.command?.misplaced_run_flag(&flag, Placed::After)),
+            Err(next) => rest = without_run_flag(command, &rest, &next)?.0,
+        }
+    }
+}
+
+/// If `error` is clap's "unexpected argument" for one of the run flags of `command`: `args`
+/// without that flag and its value, and the flag.
+fn without_run_flag(
+    command: &clap::Command,
+    args: &[OsString],
+    error: &clap::Error,
+) -> Option<(Vec<OsString>, String)> {
+    if error.kind() != ErrorKind::UnknownArgument {
+        return None;
+    }
+    let Some(ContextValue::String(flag)) = error.get(ContextKind::InvalidArg) else {
+        return None;
+    };
+    let run_arg = command
+        .get_arguments()
+        .find(|arg| arg.get_long().is_some_and(|long| flag.strip_prefix("--") == Some(long)))?;
+    // Whether `arg` is the flag, as `--flag` (false) or as `--flag=value` (true).
+    let typed_with_value = |arg: &OsString| {
+        let arg = arg.to_str()?;
+        if arg == flag {
+            Some(false)
+        } else {
+            arg.strip_prefix(flag.as_str())?.starts_with('=').then_some(true)
+        }
+    };
+    let (at, inline_value) =
+        args.iter().enumerate().find_map(|(i, arg)| Some((i, typed_with_value(arg)?)))?;
+    let len = 1 + usize::from(run_arg.get_action().takes_values() && !inline_value);
+    let mut rest = args.to_vec();
+    rest.drain(at..(at + len).min(args.len()));
+    Some((rest, flag.clone()))
+}
+
+/// Where a run flag was typed, relative to a subcommand's name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Placed {
+    Before,
+    After,
 }
 
 #[derive(Debug, Subcommand)]
@@ -147,22 +215,33 @@ impl Command {
     /// Refuses a run flag given before this subcommand that it would silently ignore
     /// (`supervisor --episodes 100 reproduce fig10` would run 50 000 episodes).
     pub fn refuse_ignored_run_flags(&self, given: &[String]) -> anyhow::Result<()> {
-        let name = self.name();
-        let Some(ignored) = given.iter().find(|flag| !self.uses_run_flag(flag)) else {
-            return Ok(());
-        };
-        let takes_its_own = Cli::command().find_subcommand(name).is_some_and(|sub| {
-            sub.get_arguments().any(|arg| arg.get_long() == ignored.strip_prefix("--"))
-        });
-        if takes_its_own {
-            anyhow::bail!(
-                "{ignored} before `{name}` would be ignored: give it after `{name}` \
-                 (supervisor {name} ... {ignored} ...)"
-            )
+        match given.iter().find(|flag| !self.uses_run_flag(flag)) {
+            Some(ignored) => Err(self.misplaced_run_flag(ignored, Placed::Before)),
+            None => Ok(()),
         }
-        anyhow::bail!(
-            "{ignored} is a flag of a run, which `{name}` does not use (see supervisor {name} --help)"
-        )
+    }
+
+    /// Why run flag `flag` cannot stand where it was typed, and where it belongs.
+    fn misplaced_run_flag(&self, flag: &str, placed: Placed) -> anyhow::Error {
+        let name = self.name();
+        let takes_its_own = || {
+            Cli::command().find_subcommand(name).is_some_and(|sub| {
+                sub.get_arguments().any(|arg| arg.get_long() == flag.strip_prefix("--"))
+            })
+        };
+        match placed {
+            Placed::Before if takes_its_own() => anyhow::anyhow!(
+                "{flag} before `{name}` would be ignored: give it after `{name}` \
+                 (supervisor {name} ... {flag} ...)"
+            ),
+            Placed::After if self.uses_run_flag(flag) => anyhow::anyhow!(
+                "{flag} after `{name}` is a flag of the run: give it before `{name}` \
+                 (supervisor {flag} ... {name} ...)"
+            ),
+            _ => anyhow::anyhow!(
+                "{flag} is a flag of a run, which `{name}` does not use (see supervisor {name} --help)"
+            ),
+        }
     }
 }
 

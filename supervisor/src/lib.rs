@@ -37,8 +37,9 @@ pub fn main() -> std::process::ExitCode {
         _ => {}
     }
     flockstep_proto::logging::init("warn");
-    let (cli, run_flags) = Cli::parse_noting_run_flags(args);
-    match dispatch(cli, &run_flags) {
+    let outcome =
+        Cli::parse_noting_run_flags(args).and_then(|(cli, run_flags)| dispatch(cli, &run_flags));
+    match outcome {
         Ok(code) => std::process::ExitCode::from(code),
         Err(e) => {
             eprintln!("supervisor: error: {e:#}");

@@ -1,11 +1,12 @@
 //! Bad input (issue 3, acceptance 6): an unknown scenario, an unreadable tree, `--uavs 0`,
 //! more UAVs than routes, a results directory that cannot be written or that holds an
-//! earlier run, settings that would make a run meaningless, bad test aids. Each gives one
-//! clear error line naming the problem and a non-zero exit, for both transports, before any
-//! process of the run starts.
+//! earlier run, settings that would make a run meaningless, bad test aids, a run flag typed
+//! where its subcommand would ignore it or does not take it. Each gives one clear error line
+//! naming the problem and a non-zero exit, for both transports, before any process of the
+//! run starts.
 
 use crate::harness::{
-    assert_nothing_left, error_line, read, run_id, run_ok, scratch, words, SUPERVISOR,
+    assert_nothing_left, error_line, read, run_fail, run_id, run_ok, scratch, words, SUPERVISOR,
 };
 use flockstep_supervisor::results::RUN_OUTPUTS;
 
@@ -233,6 +234,29 @@ fn run_flags_a_subcommand_would_ignore_are_refused() {
     assert!(String::from_utf8_lossy(&printed.stdout).contains("fig10.svg"));
     let summary = crate::harness::summary(&dir.path().join("fig10").join("s1"));
     assert_eq!(summary["tick_cap"], 50, "{summary:#}");
+}
+
+#[test]
+fn run_flags_typed_after_a_subcommand_say_where_they_belong() {
+    let dir = scratch();
+    let out = dir.path().join("fig10").display().to_string();
+    let line = error_line(&["reproduce", "fig10", "--quiet", "--out", &out]);
+    assert!(line.contains("--quiet after `reproduce` is a flag of the run"), "{line}");
+    assert!(line.contains("give it before `reproduce`"), "{line}");
+    // A value given with `=` or as the next argument, and a second misplaced flag.
+    let line = error_line(&["reproduce", "fig10", "--alpha=0.2", "--out", &out]);
+    assert!(line.contains("--alpha after `reproduce` is a flag of the run"), "{line}");
+    let line = error_line(&["reproduce", "--tick-cap", "50", "fig10", "--quiet", "--out", &out]);
+    assert!(line.contains("--tick-cap after `reproduce` is a flag of the run"), "{line}");
+    let line = error_line(&["optimum", "--uavs", "3"]);
+    assert!(line.contains("--uavs is a flag of a run, which `optimum` does not use"), "{line}");
+    let line = error_line(&["eval", "--qtables", &out, "--tick-cap", "5"]);
+    assert!(line.contains("--tick-cap is a flag of a run, which `eval` does not use"), "{line}");
+    assert!(!dir.path().join("fig10").exists(), "a refused command started a run");
+    // Anything else stays clap's own error (exit status 2).
+    let (printed, report) = run_fail(SUPERVISOR, &["reproduce", "fig10", "--no-such-flag"]);
+    assert_eq!(printed.status.code(), Some(2), "{report}");
+    assert!(String::from_utf8_lossy(&printed.stderr).contains("'--no-such-flag'"), "{report}");
 }
 
 fn as_strs(args: &[String]) -> Vec<&str> {
