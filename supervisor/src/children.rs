@@ -15,7 +15,10 @@ pub struct Process {
     child: Child,
     log: PathBuf,
     status: Option<ExitStatus>,
-    /// Peak resident set size in KiB, known once the process has exited.
+    /// Peak resident set size in KiB, known once the process has exited. It is `wait4`'s,
+    /// so at least the supervisor's own peak at the time it spawned the process (Linux
+    /// carries a peak over `exec`); in the runs measured that was below what a world or an
+    /// agent uses itself.
     pub peak_rss_kib: Option<u64>,
 }
 

@@ -205,3 +205,39 @@ fn two_simultaneous_runs_stay_independent() {
         read(&dirs[1].path().join("episodes.csv"))
     );
 }
+
+#[test]
+fn each_process_reports_its_own_peak_memory_not_its_launchers() {
+    // A launcher with a large resident set, as `cargo run` is: Linux carries a program's
+    // peak over `exec` into the next one's `getrusage`, so the supervisor must not use it.
+    let ballast = std::hint::black_box(vec![1u8; 256 << 20]);
+    let dir = scratch();
+    let id = run_id("rss");
+    let summary = supervise(
+        dir.path(),
+        &[
+            "--uavs",
+            "2",
+            "--episodes",
+            "20",
+            "--trials",
+            "1",
+            "--eval-episodes",
+            "0",
+            "--run-id",
+            &id,
+        ],
+    );
+    drop(ballast);
+    let peaks: BTreeMap<String, u64> = summary["peak_rss_kib"]
+        .as_array()
+        .expect("peak_rss_kib is a list")
+        .iter()
+        .map(|p| (p["process"].as_str().unwrap().to_string(), p["kib"].as_u64().unwrap()))
+        .collect();
+    let names: Vec<&str> = peaks.keys().map(String::as_str).collect();
+    assert_eq!(names, ["UAV1", "UAV2", "supervisor", "world"], "{summary:#}");
+    for (name, kib) in &peaks {
+        assert!((1_000..128 << 10).contains(kib), "{name} peaked at {kib} KiB\n{summary:#}");
+    }
+}
