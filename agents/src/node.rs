@@ -92,7 +92,7 @@ pub struct NodeArgs {
 /// Arguments of `agent --attach RUN_ID`: the run tells the rest.
 #[derive(Debug, Clone, Args)]
 pub struct AttachArgs {
-    /// Results directory for this agent's snapshots (default: `results/<run-id>`).
+    /// Results directory for this agent's snapshots [default: results/RUN_ID].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Ask for this slot (1-based) if its route is free [default: any free route].

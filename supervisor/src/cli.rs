@@ -122,7 +122,7 @@ pub enum Command {
     Reproduce {
         #[arg(value_enum)]
         figure: Figure,
-        /// Directory for the runs and the plot (default: `results/<figure>`).
+        /// Directory for the runs and the plot [default: results/FIGURE, e.g. results/fig10].
         #[arg(long)]
         out: Option<PathBuf>,
         #[arg(long, default_value_t = 50_000)]
@@ -322,7 +322,7 @@ pub struct RunArgs {
     /// With `--episodes 0` the run only evaluates them greedily.
     #[arg(long)]
     pub resume: Option<PathBuf>,
-    /// Results directory (default: `results/<run-id>`).
+    /// Results directory [default: results/RUN_ID].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Replace the results of an earlier run in `--out` (without it such a directory is
