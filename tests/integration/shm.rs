@@ -1,6 +1,7 @@
 //! The multi-process path (issue 3): real `world` and `agent` processes over iceoryx2.
 //! Equivalence with the in-process runner, lockstep seen from the agents' own traces,
-//! isolation of two simultaneous runs, and nothing left in shared memory afterwards.
+//! isolation of two simultaneous runs, nothing left in shared memory afterwards, and each
+//! process's own peak memory in the summary.
 
 use crate::harness::{read, run_id, scratch, supervise, words, SUPERVISOR};
 use flockstep_proto::transport::leftover_files;
