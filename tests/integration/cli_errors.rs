@@ -6,7 +6,8 @@
 //! run starts.
 
 use crate::harness::{
-    assert_nothing_left, error_line, read, run_fail, run_id, run_ok, scratch, words, SUPERVISOR,
+    assert_nothing_left, error_line, first_difference, read, run_fail, run_id, run_ok, scratch,
+    words, SUPERVISOR,
 };
 use flockstep_supervisor::results::RUN_OUTPUTS;
 
@@ -147,7 +148,9 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
         "{line}"
     );
     assert!(line.contains("--overwrite"), "{line}");
-    assert_eq!(read(&out.join("episodes.csv")), episodes, "the refused run changed the results");
+    if let Some(difference) = first_difference(&read(&out.join("episodes.csv")), &episodes) {
+        panic!("the refused run changed the results: {difference}");
+    }
     let line = error_line(&as_strs(&run(&["--overwrite", "--resume", &out_arg])));
     assert!(line.contains("is the results directory it would replace"), "{line}");
     assert!(out.join("qtables").join("uav1_trial0.bin").exists(), "the snapshots were removed");

@@ -1,7 +1,7 @@
 //! Determinism (issue 2, acceptance 5): the same command twice gives byte-identical
 //! `episodes.csv`; another seed gives different bytes.
 
-use crate::harness::{read, scratch, supervise};
+use crate::harness::{first_difference, read, scratch, supervise};
 
 fn episodes(seed: &str) -> Vec<u8> {
     let dir = scratch();
@@ -29,6 +29,8 @@ fn episodes(seed: &str) -> Vec<u8> {
 fn same_seed_gives_identical_episodes_and_another_seed_does_not() {
     let first = episodes("7");
     assert!(first.len() > 1000, "episodes.csv is suspiciously short");
-    assert_eq!(first, episodes("7"), "two runs with seed 7 differ");
+    if let Some(difference) = first_difference(&first, &episodes("7")) {
+        panic!("two runs with seed 7 differ: {difference}");
+    }
     assert_ne!(first, episodes("8"), "seeds 7 and 8 gave the same episodes");
 }

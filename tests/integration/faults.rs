@@ -3,8 +3,8 @@
 //! run that does not finish in time fails the test as a deadlock.
 
 use crate::harness::{
-    assert_nothing_left, episode_rows, pids_with, read, run_id, scratch, signal, summary,
-    supervise, wait_until, words, world_log, Supervised, AGENT,
+    assert_nothing_left, assert_same_file, episode_rows, pids_with, read, run_id, scratch, signal,
+    summary, supervise, wait_until, words, world_log, Supervised, AGENT,
 };
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
@@ -299,8 +299,13 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
             .expect("the rogue opens the run");
         let mut sent = 0;
         let start = Instant::now();
-        while sent < 200 && start.elapsed() < Duration::from_secs(60) {
-            let Ok(Some(observation)) = ports.try_observation() else {
+        while sent < 300 && start.elapsed() < Duration::from_secs(60) {
+            // The newest round: a forged answer to an older one would only be stale.
+            let mut newest = None;
+            while let Ok(Some(observation)) = ports.try_observation() {
+                newest = Some(observation);
+            }
+            let Some(observation) = newest else {
                 std::thread::sleep(Duration::from_millis(1));
                 continue;
             };
@@ -313,14 +318,18 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
             let mut bad = Action::new(0);
             bad.round = observation.round;
             bad.n_trials = observation.n_trials;
-            match sent % 4 {
+            match sent % 6 {
                 0 => bad.agent = 99,
                 1 => bad.n_trials = 999,
                 2 => bad.trials[0].flags.waypoint = 5000,
-                _ => {
+                3 => {
                     bad.trials[1].n_commands = 1;
                     bad.trials[1].commands[0] = 77;
                 }
+                // Well-formed answers for UAV1 (hover, no flags) to this round and the next,
+                // which the world has not published yet: only the sender gives them away.
+                4 => {}
+                _ => bad.round += 1,
             }
             ports.publish_action(&bad).expect("publish a rogue action");
             sent += 1;
@@ -340,9 +349,13 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         log.contains("join refused") || log.contains("ignored a join request"),
         "rogue joins not logged:\n{log}"
     );
+    assert!(
+        log.contains("dropped an action sent for this agent by another process"),
+        "no well-formed copy of UAV1's answer was refused:\n{log}"
+    );
     // Nothing the rogue sent changed the run: it equals the in-process twin byte for byte.
     supervise(inproc.path(), &[&args[..], &words("--transport inproc")].concat());
-    assert_eq!(read(&shm.path().join("episodes.csv")), read(&inproc.path().join("episodes.csv")));
+    assert_same_file(&shm.path().join("episodes.csv"), &inproc.path().join("episodes.csv"));
     assert_nothing_left(&id);
 }
 

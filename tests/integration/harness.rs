@@ -92,6 +92,38 @@ pub fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
 
+/// Where `a` and `b` first part, for a failure message (None if they are equal): the byte
+/// offset and the line it falls in, from each side.
+pub fn first_difference(a: &[u8], b: &[u8]) -> Option<String> {
+    let at = a.iter().zip(b).position(|(x, y)| x != y).unwrap_or(a.len().min(b.len()));
+    if a.len() == b.len() && at == a.len() {
+        return None;
+    }
+    let line_of = |bytes: &[u8]| {
+        let start =
+            bytes[..at.min(bytes.len())].iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
+        let end =
+            bytes[start..].iter().position(|&c| c == b'\n').map_or(bytes.len(), |i| start + i);
+        String::from_utf8_lossy(&bytes[start..end.min(start + 200)]).into_owned()
+    };
+    let line = a[..at].iter().filter(|&&c| c == b'\n').count() + 1;
+    Some(format!(
+        "they part at byte {at} (line {line}; {} and {} bytes in all):\n  {:?}\n  {:?}",
+        a.len(),
+        b.len(),
+        line_of(a),
+        line_of(b)
+    ))
+}
+
+/// Fails unless the files at `a` and `b` hold the same bytes, naming both and where they
+/// part.
+pub fn assert_same_file(a: &Path, b: &Path) {
+    if let Some(difference) = first_difference(&read(a), &read(b)) {
+        panic!("{} and {} differ: {difference}", a.display(), b.display());
+    }
+}
+
 /// The world's log of the run whose results are in `dir`.
 pub fn world_log(dir: &Path) -> String {
     String::from_utf8(read(&dir.join("logs").join("world.log"))).expect("the world log is UTF-8")

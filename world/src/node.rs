@@ -13,7 +13,7 @@ use crate::sim::{EpisodeConfig, World};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use flockstep_proto::transport::{
-    exit_with_parent, RunConfig, RunServices, SignalMode, TransportError, WorldPorts,
+    exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
 };
 use flockstep_proto::{slots_in, JoinRequest, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
 use std::sync::Arc;
@@ -123,13 +123,15 @@ fn run_info(args: &WorldArgs) -> Result<RunInfo> {
     })
 }
 
-/// Who holds which slot: the nonce of its join request and its process id.
+/// Who holds which slot: the nonce of its join request, its process id, and the iceoryx2
+/// node that sent the request, the only one whose actions answer for the slot.
 #[derive(Debug)]
 struct Members {
     owners: [u64; MAX_AGENTS],
     pids: [u32; MAX_AGENTS],
+    nodes: [SenderNode; MAX_AGENTS],
     /// Join requests read and not yet answered: the next round answers them.
-    waiting: Vec<JoinRequest>,
+    waiting: Vec<(JoinRequest, SenderNode)>,
     /// A join request refused in the round being prepared (0: none).
     refused: u64,
 }
@@ -140,11 +142,31 @@ impl Members {
     fn is_repeat(&self, request: &JoinRequest) -> bool {
         request.nonce != 0 && self.owners.contains(&request.nonce)
     }
+
+    /// Gives `slot` to the agent that sent `request` from `node`.
+    fn seat(&mut self, slot: usize, request: &JoinRequest, node: SenderNode) {
+        self.owners[slot] = request.nonce;
+        self.pids[slot] = request.pid;
+        self.nodes[slot] = node;
+    }
+
+    /// Frees `slot`.
+    fn vacate(&mut self, slot: usize) {
+        self.owners[slot] = 0;
+        self.pids[slot] = 0;
+        self.nodes[slot] = SenderNode::default();
+    }
 }
 
 impl Default for Members {
     fn default() -> Self {
-        Members { owners: [0; MAX_AGENTS], pids: [0; MAX_AGENTS], waiting: Vec::new(), refused: 0 }
+        Members {
+            owners: [0; MAX_AGENTS],
+            pids: [0; MAX_AGENTS],
+            nodes: [SenderNode::default(); MAX_AGENTS],
+            waiting: Vec::new(),
+            refused: 0,
+        }
     }
 }
 
@@ -167,16 +189,15 @@ impl WorldNode {
             &format_args!("the join requests of the {uavs} starting agents"),
             timeout,
             || {
-                while let Some(request) = ports.try_join()? {
+                while let Some((request, node)) = ports.try_join()? {
                     let slot = request.slot as usize;
                     if members.is_repeat(&request) {
                         continue;
                     }
                     if request.nonce != 0 && slot < uavs && members.owners[slot] == 0 {
-                        members.owners[slot] = request.nonce;
-                        members.pids[slot] = request.pid;
+                        members.seat(slot, &request, node);
                     } else {
-                        members.waiting.push(request);
+                        members.waiting.push((request, node));
                     }
                 }
                 while let Some(control) = ports.try_control()? {
@@ -201,7 +222,7 @@ impl WorldNode {
     /// the next round on, or a refusal. The trials let the agent in at their next episode
     /// start.
     fn admit_joiners(&mut self) -> Result<()> {
-        for request in std::mem::take(&mut self.members.waiting) {
+        for (request, node) in std::mem::take(&mut self.members.waiting) {
             if self.members.is_repeat(&request) {
                 continue;
             }
@@ -213,8 +234,7 @@ impl WorldNode {
             match self.world.free_slot(wanted) {
                 Some(slot) => {
                     self.world.admit(slot);
-                    self.members.owners[slot] = request.nonce;
-                    self.members.pids[slot] = request.pid;
+                    self.members.seat(slot, &request, node);
                     tracing::info!(
                         uav = slot + 1,
                         pid = request.pid,
@@ -244,8 +264,7 @@ impl WorldNode {
             "agent dropped from the run: {why}"
         );
         self.world.remove(slot);
-        self.members.owners[slot] = 0;
-        self.members.pids[slot] = 0;
+        self.members.vacate(slot);
         let cleaned = self.ports.services().cleanup_dead_nodes();
         if cleaned > 0 {
             tracing::info!(nodes = cleaned, "removed the resources of dead nodes");
@@ -304,8 +323,8 @@ impl WorldNode {
             {
                 last_look = Instant::now();
                 self.ports.flush_episodes()?;
-                while let Some(request) = self.ports.try_join()? {
-                    self.members.waiting.push(request);
+                while let Some(joiner) = self.ports.try_join()? {
+                    self.members.waiting.push(joiner);
                 }
                 while let Some(control) = self.ports.try_control()? {
                     stop_requested |= control.stop == 1;
@@ -339,7 +358,8 @@ impl WorldNode {
 
     /// Waits for the answer of every live agent to `this_round` and applies them
     /// (unless `apply` is false: the answers to a stop). Answers to other rounds, from slots
-    /// not in the barrier, or that fail the checks are logged and dropped. Ends early when
+    /// not in the barrier, sent by a process other than the one admitted to their slot, or
+    /// that fail the checks are logged and dropped. Ends early when
     /// every agent still missing is known to be dead; ends at `timeout` otherwise.
     fn collect_actions(
         &mut self,
@@ -367,6 +387,16 @@ impl WorldNode {
                             action.round,
                             action.agent,
                             "dropped an action that does not answer this round"
+                        );
+                        continue;
+                    }
+                    // Checked before the second-answer check, so a copy sent first cannot
+                    // shut out the agent's own answer.
+                    if SenderNode::of(&action) != members.nodes[slot] {
+                        tracing::warn!(
+                            round,
+                            uav = slot + 1,
+                            "dropped an action sent for this agent by another process"
                         );
                         continue;
                     }

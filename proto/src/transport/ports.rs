@@ -31,6 +31,21 @@ pub type ObservationSample = Sample<Ipc, Observation, ()>;
 /// An action as the world reads it: straight from shared memory, no copy.
 pub type ActionSample = Sample<Ipc, Action, ()>;
 
+/// The iceoryx2 node a sample was sent from. Each process of a run has one node, whose id
+/// iceoryx2 writes into the header of every sample the process sends, so it tells
+/// processes apart where a message's own fields (slot, round) can be copied: the world
+/// binds each agent slot to the node that asked to join on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SenderNode(u128);
+
+impl SenderNode {
+    /// The node that sent `sample`.
+    #[inline]
+    pub fn of<T: Debug + ZeroCopySend>(sample: &Sample<Ipc, T, ()>) -> SenderNode {
+        SenderNode(sample.header().node_id().value())
+    }
+}
+
 impl RunServices {
     /// The world's ports.
     pub fn into_world(self) -> Result<WorldPorts, TransportError> {
@@ -277,10 +292,10 @@ impl WorldPorts {
         Ok(sample.map(|s| *s))
     }
 
-    /// The next join request, if any.
-    pub fn try_join(&self) -> Result<Option<JoinRequest>, TransportError> {
+    /// The next join request, if any, with the node that sent it.
+    pub fn try_join(&self) -> Result<Option<(JoinRequest, SenderNode)>, TransportError> {
         let sample = self.join.receive().map_err(|e| self.err(JOIN, "receiving", e))?;
-        Ok(sample.map(|s| *s))
+        Ok(sample.map(|s| (*s, SenderNode::of(&s))))
     }
 
     /// Publishes the run's description (kept as history for agents that attach later).
