@@ -53,8 +53,10 @@ fn world_agent_and_supervisor_exchange_every_message() {
     assert_eq!(report.episode, 11);
 
     supervisor.send_control(&Control { stop: 1, ..Control::default() }).unwrap();
-    let control = world.waiter().wait(&"stop command", BOUND, || world.try_control()).unwrap();
+    let (control, sender) =
+        world.waiter().wait(&"stop command", BOUND, || world.try_control()).unwrap();
     assert_eq!(control.stop, 1);
+    assert_eq!(sender.pid(), Some(std::process::id()), "the sender's process is known");
 }
 
 #[test]

@@ -6,6 +6,7 @@ use crate::harness::{
     assert_nothing_left, assert_same_file, episode_rows, pids_with, read, run_id, scratch, signal,
     summary, supervise, wait_until, words, world_log, Supervised, AGENT,
 };
+use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
 use std::process::Command;
@@ -314,6 +315,12 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
                 ports.send_join(&JoinRequest { nonce: 0, pid: 1, slot: 7 }).expect("send a join");
                 let any = JoinRequest { nonce: 99, pid: 1, slot: ANY_SLOT };
                 ports.send_join(&any).expect("send a join");
+                // Orders only the supervisor may give: stop, and every agent gone.
+                let control = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
+                    .and_then(RunServices::into_supervisor)
+                    .expect("the rogue opens the run's control");
+                let stop = Control { stop: 1, gone: u64::MAX, ..Control::default() };
+                control.send_control(&stop).expect("send a control command");
             }
             let mut bad = Action::new(0);
             bad.round = observation.round;
@@ -353,6 +360,11 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         log.contains("dropped an action sent for this agent by another process"),
         "no well-formed copy of UAV1's answer was refused:\n{log}"
     );
+    assert!(
+        log.contains("ignored a control command from a process not the supervisor"),
+        "the rogue's stop was not refused:\n{log}"
+    );
+    assert_eq!(summary(shm.path())["complete"], true, "the rogue stopped the run");
     // Nothing the rogue sent changed the run: it equals the in-process twin byte for byte.
     supervise(inproc.path(), &[&args[..], &words("--transport inproc")].concat());
     assert_same_file(&shm.path().join("episodes.csv"), &inproc.path().join("episodes.csv"));
@@ -378,5 +390,48 @@ fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
         "the ladder did not have to kill the hung agent: {notes}"
     );
     assert_eq!(episode_rows(dir.path()).iter().filter(|r| r[1] == 1).count(), 2000);
+    assert_nothing_left(&id);
+}
+
+/// A known limit (docs/MEMBERSHIP.md): no episode record may be lost, so a process that
+/// subscribes to them and never reads stalls the world. The run must then fail in bounded
+/// time with the service named, keep what was collected, and leave nothing behind.
+#[test]
+fn a_subscriber_that_never_reads_the_records_fails_the_run_cleanly() {
+    let dir = scratch();
+    let (id, out) = (run_id("idle"), dir.path().display().to_string());
+    let run = Supervised::start(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 4 --seed 3"),
+    ));
+    let (subscribed_tx, subscribed) = std::sync::mpsc::channel();
+    let (release, released) = std::sync::mpsc::channel::<()>();
+    let idle_id = id.clone();
+    let idle = std::thread::spawn(move || {
+        let start = Instant::now();
+        let ports = loop {
+            let config = RunConfig::new(&idle_id, SignalMode::Untouched);
+            match RunServices::open(&config).and_then(RunServices::into_supervisor) {
+                Ok(ports) => break ports,
+                Err(e) if start.elapsed() > Duration::from_secs(30) => {
+                    panic!("the idle reader could not open the run: {e}")
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(5)),
+            }
+        };
+        subscribed_tx.send(()).expect("the test waits for the idle reader");
+        // Holds its subscriber, unread, until the run is over.
+        let _ = released.recv_timeout(DEADLOCK);
+        drop(ports);
+    });
+    subscribed.recv_timeout(Duration::from_secs(40)).expect("the idle reader subscribed");
+    let (status, report) = run.finish(DEADLOCK);
+    release.send(()).expect("the idle reader holds on");
+    idle.join().expect("the idle reader");
+    assert_eq!(status.status.code(), Some(1), "{report}");
+    assert!(report.contains("`episodes` not drained for 10s"), "{report}");
+    assert_eq!(summary(dir.path())["complete"], false);
+    assert!(!episode_rows(dir.path()).is_empty(), "the records collected before are lost");
     assert_nothing_left(&id);
 }

@@ -12,6 +12,7 @@ use crate::scenario::Scenario;
 use crate::sim::{EpisodeConfig, World};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
+use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
 };
@@ -106,6 +107,7 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         ports,
         members: Members::default(),
         agent_timeout: Duration::from_millis(args.agent_timeout_ms),
+        supervisor: args.parent_pid,
     };
     let stop_requested = node.await_starting_agents(args.uavs, startup)?;
     node.barrier(stop_requested)
@@ -129,7 +131,7 @@ fn run_info(args: &WorldArgs) -> Result<RunInfo> {
 struct Members {
     owners: [u64; MAX_AGENTS],
     pids: [u32; MAX_AGENTS],
-    nodes: [SenderNode; MAX_AGENTS],
+    nodes: [Option<SenderNode>; MAX_AGENTS],
     /// Join requests read and not yet answered: the next round answers them.
     waiting: Vec<(JoinRequest, SenderNode)>,
     /// A join request refused in the round being prepared (0: none).
@@ -147,14 +149,14 @@ impl Members {
     fn seat(&mut self, slot: usize, request: &JoinRequest, node: SenderNode) {
         self.owners[slot] = request.nonce;
         self.pids[slot] = request.pid;
-        self.nodes[slot] = node;
+        self.nodes[slot] = Some(node);
     }
 
     /// Frees `slot`.
     fn vacate(&mut self, slot: usize) {
         self.owners[slot] = 0;
         self.pids[slot] = 0;
-        self.nodes[slot] = SenderNode::default();
+        self.nodes[slot] = None;
     }
 }
 
@@ -163,7 +165,7 @@ impl Default for Members {
         Members {
             owners: [0; MAX_AGENTS],
             pids: [0; MAX_AGENTS],
-            nodes: [SenderNode::default(); MAX_AGENTS],
+            nodes: [None; MAX_AGENTS],
             waiting: Vec::new(),
             refused: 0,
         }
@@ -175,6 +177,25 @@ struct WorldNode {
     ports: WorldPorts,
     members: Members,
     agent_timeout: Duration,
+    /// The supervisor's process id (`--parent-pid`): control commands count from it only.
+    supervisor: Option<u32>,
+}
+
+/// The next control command sent by the supervisor's process, if any; commands from any
+/// other process are logged and skipped. Without a known supervisor every command counts.
+fn next_control(
+    ports: &WorldPorts,
+    supervisor: Option<u32>,
+) -> Result<Option<Control>, TransportError> {
+    while let Some((control, sender)) = ports.try_control()? {
+        match (supervisor, sender.pid()) {
+            (Some(expected), pid) if pid != Some(expected) => {
+                tracing::warn!(?pid, "ignored a control command from a process not the supervisor");
+            }
+            _ => return Ok(Some(control)),
+        }
+    }
+    Ok(None)
 }
 
 impl WorldNode {
@@ -183,7 +204,7 @@ impl WorldNode {
     /// and their routes stay free for agents that attach. Returns whether the supervisor
     /// asked to stop meanwhile.
     fn await_starting_agents(&mut self, uavs: usize, timeout: Duration) -> Result<bool> {
-        let Self { ports, members, .. } = self;
+        let Self { ports, members, supervisor, .. } = self;
         let (mut gone, mut stop) = (0u64, false);
         ports.waiter().wait(
             &format_args!("the join requests of the {uavs} starting agents"),
@@ -200,7 +221,7 @@ impl WorldNode {
                         members.waiting.push((request, node));
                     }
                 }
-                while let Some(control) = ports.try_control()? {
+                while let Some(control) = next_control(ports, *supervisor)? {
                     gone |= control.gone;
                     stop |= control.stop == 1;
                 }
@@ -326,7 +347,7 @@ impl WorldNode {
                 while let Some(joiner) = self.ports.try_join()? {
                     self.members.waiting.push(joiner);
                 }
-                while let Some(control) = self.ports.try_control()? {
+                while let Some(control) = next_control(&self.ports, self.supervisor)? {
                     stop_requested |= control.stop == 1;
                 }
             }
@@ -392,7 +413,7 @@ impl WorldNode {
                     }
                     // Checked before the second-answer check, so a copy sent first cannot
                     // shut out the agent's own answer.
-                    if SenderNode::of(&action) != members.nodes[slot] {
+                    if Some(SenderNode::of(&action)) != members.nodes[slot] {
                         tracing::warn!(
                             round,
                             uav = slot + 1,

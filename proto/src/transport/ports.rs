@@ -9,6 +9,7 @@ use super::{
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
 use crate::{Action, EpisodeBatch, EpisodeReport, JoinRequest, Observation, RunInfo};
+use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -34,15 +35,22 @@ pub type ActionSample = Sample<Ipc, Action, ()>;
 /// The iceoryx2 node a sample was sent from. Each process of a run has one node, whose id
 /// iceoryx2 writes into the header of every sample the process sends, so it tells
 /// processes apart where a message's own fields (slot, round) can be copied: the world
-/// binds each agent slot to the node that asked to join on it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct SenderNode(u128);
+/// binds each agent slot to the node that asked to join on it, and takes control commands
+/// only from the supervisor's process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SenderNode(UniqueNodeId);
 
 impl SenderNode {
     /// The node that sent `sample`.
     #[inline]
     pub fn of<T: Debug + ZeroCopySend>(sample: &Sample<Ipc, T, ()>) -> SenderNode {
-        SenderNode(sample.header().node_id().value())
+        SenderNode(sample.header().node_id())
+    }
+
+    /// The process that created the node (iceoryx2 builds the id from it).
+    pub fn pid(&self) -> Option<u32> {
+        let pid = self.0.pid::<Ipc>().ok()?.value();
+        u32::try_from(pid).ok()
     }
 }
 
@@ -286,10 +294,10 @@ impl WorldPorts {
         Ok(())
     }
 
-    /// The next control command, if any.
-    pub fn try_control(&self) -> Result<Option<Control>, TransportError> {
+    /// The next control command, if any, with the node that sent it.
+    pub fn try_control(&self) -> Result<Option<(Control, SenderNode)>, TransportError> {
         let sample = self.control.receive().map_err(|e| self.err(CONTROL, "receiving", e))?;
-        Ok(sample.map(|s| *s))
+        Ok(sample.map(|s| (*s, SenderNode::of(&s))))
     }
 
     /// The next join request, if any, with the node that sent it.
