@@ -191,11 +191,7 @@ fn serve(
     if faults.contains(&Fault::CrashBeforeJoin) {
         std::process::abort();
     }
-    let request = JoinRequest {
-        nonce: join_nonce(),
-        pid: std::process::id(),
-        slot: wanted.map_or(ANY_SLOT, |s| s as u32),
-    };
+    let request = JoinRequest::new(join_nonce(), wanted.map_or(ANY_SLOT, |s| s as u32));
     let world_timeout = Duration::from_millis(learner.world_timeout_ms);
     let (slot, first) = await_admission(&ports, &request, world_timeout)?;
     let nonce = request.nonce;

@@ -167,12 +167,19 @@ impl Action {
 #[repr(C)]
 #[type_name("flockstep::JoinRequest")]
 pub struct JoinRequest {
-    /// Identifies the request in the world's answer (`Observation::admitted_nonce`); not 0.
+    /// Identifies the request in the world's answer (`Observation::owners`); not 0.
     pub nonce: u64,
-    /// The agent's process id: the world watches it to notice a dead agent at once.
-    pub pid: u32,
     /// The slot asked for (0-based), or [`ANY_SLOT`].
     pub slot: u32,
+    pub _reserved: u32,
+}
+
+impl JoinRequest {
+    /// The request of an agent that asks for `slot`. The world learns the agent's process
+    /// from the request's sender (its iceoryx2 node), not from anything the request says.
+    pub fn new(nonce: u64, slot: u32) -> JoinRequest {
+        JoinRequest { nonce, slot, _reserved: 0 }
+    }
 }
 
 /// `JoinRequest::slot` of an agent that takes any free route.

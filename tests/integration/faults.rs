@@ -298,9 +298,17 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         let ports = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
             .and_then(RunServices::into_agent)
             .expect("the rogue opens the run");
+        // A second supervisor's ports, for orders only the supervisor may give. They live as
+        // long as the rogue (a sample of a publisher gone before the world connected to it
+        // would be lost), and it reads the records they receive, or the world would wait
+        // for it (docs/MEMBERSHIP.md, known limits).
+        let control = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
+            .and_then(RunServices::into_supervisor)
+            .expect("the rogue opens the run's control");
         let mut sent = 0;
         let start = Instant::now();
         while sent < 300 && start.elapsed() < Duration::from_secs(60) {
+            while let Ok(Some(_)) = control.try_episode() {}
             // The newest round: a forged answer to an older one would only be stale.
             let mut newest = None;
             while let Ok(Some(observation)) = ports.try_observation() {
@@ -312,13 +320,9 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
             };
             if sent == 0 {
                 // Joins while the run is under way (the world's ports surely exist by now).
-                ports.send_join(&JoinRequest { nonce: 0, pid: 1, slot: 7 }).expect("send a join");
-                let any = JoinRequest { nonce: 99, pid: 1, slot: ANY_SLOT };
-                ports.send_join(&any).expect("send a join");
-                // Orders only the supervisor may give: stop, and every agent gone.
-                let control = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
-                    .and_then(RunServices::into_supervisor)
-                    .expect("the rogue opens the run's control");
+                ports.send_join(&JoinRequest::new(0, 7)).expect("send a join");
+                ports.send_join(&JoinRequest::new(99, ANY_SLOT)).expect("send a join");
+                // Stop, and every agent gone.
                 let stop = Control { stop: 1, gone: u64::MAX, ..Control::default() };
                 control.send_control(&stop).expect("send a control command");
             }

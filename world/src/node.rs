@@ -148,7 +148,8 @@ impl Members {
     /// Gives `slot` to the agent that sent `request` from `node`.
     fn seat(&mut self, slot: usize, request: &JoinRequest, node: SenderNode) {
         self.owners[slot] = request.nonce;
-        self.pids[slot] = request.pid;
+        // 0 (unknown) leaves the agent's death to the deadline.
+        self.pids[slot] = node.pid().unwrap_or(0);
         self.nodes[slot] = Some(node);
     }
 
@@ -248,7 +249,7 @@ impl WorldNode {
                 continue;
             }
             if request.nonce == 0 {
-                tracing::warn!(pid = request.pid, "ignored a join request with a zero nonce");
+                tracing::warn!(pid = ?node.pid(), "ignored a join request with a zero nonce");
                 continue;
             }
             let wanted = (request.slot != ANY_SLOT).then_some(request.slot as usize);
@@ -258,14 +259,14 @@ impl WorldNode {
                     self.members.seat(slot, &request, node);
                     tracing::info!(
                         uav = slot + 1,
-                        pid = request.pid,
+                        pid = ?node.pid(),
                         "agent admitted; it joins each trial at its next episode"
                     );
                 }
                 None => {
                     self.members.refused = request.nonce;
                     tracing::warn!(
-                        pid = request.pid,
+                        pid = ?node.pid(),
                         slot = request.slot,
                         "join refused: no such free route"
                     );
