@@ -13,6 +13,7 @@ const RECENT: usize = 200;
 pub struct Recorder {
     collector: Collector,
     bar: ProgressBar,
+    quiet: bool,
     started: Instant,
     last_draw: Instant,
     env_steps: u64,
@@ -38,7 +39,23 @@ impl Recorder {
             .progress_chars("=> "),
         );
         let now = Instant::now();
-        Recorder { collector, bar, started: now, last_draw: now, env_steps: 0, live: 0, unshown: 0 }
+        Recorder {
+            collector,
+            bar,
+            quiet,
+            started: now,
+            last_draw: now,
+            env_steps: 0,
+            live: 0,
+            unshown: 0,
+        }
+    }
+
+    /// Prints `line` on stderr above the progress bar, unless the run is quiet.
+    pub fn say(&self, line: &str) {
+        if !self.quiet {
+            self.bar.suspend(|| eprintln!("supervisor: {line}"));
+        }
     }
 
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {

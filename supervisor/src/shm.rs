@@ -50,6 +50,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
             fleet.spawn_agent(slot, false)?;
         }
         recorder.set_live(config.uavs);
+        announce(config, recorder);
         fleet.supervise(&ports, recorder, stop)
     });
     // A failed run brings its children down at once; a finished one lets them leave.
@@ -63,6 +64,29 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         outcome.notes.push(format!("had to signal {} to stop", forced.join(", ")));
     }
     Ok(outcome)
+}
+
+/// Says which run this is and, if the scenario has routes no agent was started for, how
+/// another agent joins it: the run id is otherwise in no output of a run given `--out`.
+fn announce(config: &RunConfig, recorder: &Recorder) {
+    let id = &config.run_id;
+    recorder.say(&format!(
+        "run {id}: a world and {}, results in {}",
+        count(config.uavs, "agent"),
+        config.out.display()
+    ));
+    let free = config.scenario.agent_slots().saturating_sub(config.uavs);
+    if free > 0 {
+        let me = std::env::current_exe()
+            .map_or_else(|_| "supervisor".to_string(), |path| path.display().to_string());
+        let routes = count(free, "route");
+        recorder.say(&format!("{routes} free; another agent joins with: {me} agent --attach {id}"));
+    }
+}
+
+/// "1 agent", "2 agents".
+fn count(n: usize, thing: &str) -> String {
+    format!("{n} {thing}{}", if n == 1 { "" } else { "s" })
 }
 
 /// The world and the agent processes of a run.

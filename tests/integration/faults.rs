@@ -30,6 +30,34 @@ fn run_args<'a>(id: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     args
 }
 
+/// The run id is in no output of a run given `--out`: the supervisor says it at the start,
+/// and how another agent joins if routes are free; `--quiet` says nothing.
+#[test]
+fn a_run_names_its_id_and_how_to_attach_unless_quiet() {
+    let stderr_of = |scenario: &str, quiet: bool| {
+        let dir = scratch();
+        let (id, out) = (run_id("announce"), dir.path().display().to_string());
+        let mut args = run_args(&id, &out, &["--scenario", scenario, "--uavs", "2"]);
+        args.extend(["--episodes", "300", "--trials", "1", "--eval-episodes", "0"]);
+        args.retain(|&a| quiet || a != "--quiet");
+        let output = crate::harness::run_ok(crate::harness::SUPERVISOR, &args);
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        (id, out, stderr)
+    };
+    let (id, out, stderr) = stderr_of("s4", false);
+    assert!(
+        stderr.contains(&format!("supervisor: run {id}: a world and 2 agents, results in {out}")),
+        "{stderr}"
+    );
+    assert!(stderr.contains("1 route free; another agent joins with: "), "{stderr}");
+    assert!(stderr.contains(&format!(" agent --attach {id}\n")), "{stderr}");
+    let (id, _, stderr) = stderr_of("s3", false);
+    assert!(stderr.contains(&format!("supervisor: run {id}")), "{stderr}");
+    assert!(!stderr.contains("--attach"), "s3 has no free route:\n{stderr}");
+    let (_, _, stderr) = stderr_of("s4", true);
+    assert!(!stderr.contains("supervisor:"), "--quiet:\n{stderr}");
+}
+
 #[test]
 fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     let dir = scratch();
