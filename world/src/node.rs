@@ -125,12 +125,11 @@ fn run_info(args: &WorldArgs) -> Result<RunInfo> {
     })
 }
 
-/// Who holds which slot: the nonce of its join request, its process id, and the iceoryx2
-/// node that sent the request, the only one whose actions answer for the slot.
+/// Who holds which slot: the nonce of its join request, and the iceoryx2 node that sent the
+/// request, the only one whose actions answer for the slot (and whose process is watched).
 #[derive(Debug)]
 struct Members {
     owners: [u64; MAX_AGENTS],
-    pids: [u32; MAX_AGENTS],
     nodes: [Option<SenderNode>; MAX_AGENTS],
     /// Join requests read and not yet answered: the next round answers them.
     waiting: Vec<(JoinRequest, SenderNode)>,
@@ -148,16 +147,18 @@ impl Members {
     /// Gives `slot` to the agent that sent `request` from `node`.
     fn seat(&mut self, slot: usize, request: &JoinRequest, node: SenderNode) {
         self.owners[slot] = request.nonce;
-        // 0 (unknown) leaves the agent's death to the deadline.
-        self.pids[slot] = node.pid().unwrap_or(0);
         self.nodes[slot] = Some(node);
     }
 
     /// Frees `slot`.
     fn vacate(&mut self, slot: usize) {
         self.owners[slot] = 0;
-        self.pids[slot] = 0;
         self.nodes[slot] = None;
+    }
+
+    /// The process of `slot`'s agent; 0 if unknown, which leaves its death to the deadline.
+    fn pid(&self, slot: usize) -> u32 {
+        self.nodes[slot].and_then(|node| node.pid()).unwrap_or(0)
     }
 }
 
@@ -165,7 +166,6 @@ impl Default for Members {
     fn default() -> Self {
         Members {
             owners: [0; MAX_AGENTS],
-            pids: [0; MAX_AGENTS],
             nodes: [None; MAX_AGENTS],
             waiting: Vec::new(),
             refused: 0,
@@ -282,7 +282,7 @@ impl WorldNode {
     fn drop_agent(&mut self, slot: usize, why: &str) {
         tracing::warn!(
             uav = slot + 1,
-            pid = self.members.pids[slot],
+            pid = self.members.pid(slot),
             "agent dropped from the run: {why}"
         );
         self.world.remove(slot);
@@ -450,7 +450,7 @@ impl WorldNode {
                 let since = *slow_since.get_or_insert_with(Instant::now);
                 if since.elapsed() > DEATH_CHECK_AFTER {
                     answers.gone = slots_in(missing)
-                        .filter(|&s| !process_alive(members.pids[s]))
+                        .filter(|&s| !process_alive(members.pid(s)))
                         .fold(0, |m, s| m | 1 << s);
                     if answers.gone == missing {
                         return Ok(Some(()));
