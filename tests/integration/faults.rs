@@ -327,9 +327,9 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
             .and_then(RunServices::into_agent)
             .expect("the rogue opens the run");
         // A second supervisor's ports, for orders only the supervisor may give. They live as
-        // long as the rogue (a sample of a publisher gone before the world connected to it
-        // would be lost), and it reads the records they receive, or the world would wait
-        // for it (docs/MEMBERSHIP.md, known limits).
+        // long as the rogue (a sample of a publisher gone before the world connected to it is
+        // lost: iceoryx2 issue #39), and it reads the records they receive, or the world would
+        // wait for it (docs/MEMBERSHIP.md, known limits).
         let control = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
             .and_then(RunServices::into_supervisor)
             .expect("the rogue opens the run's control");
