@@ -77,10 +77,10 @@ fn announce(config: &RunConfig, recorder: &Recorder) {
     ));
     let free = config.scenario.agent_slots().saturating_sub(config.uavs);
     if free > 0 {
-        let me = std::env::current_exe()
-            .map_or_else(|_| "supervisor".to_string(), |path| path.display().to_string());
-        let routes = count(free, "route");
-        recorder.say(&format!("{routes} free; another agent joins with: {me} agent --attach {id}"));
+        let me = own_path().map_or_else(|_| "supervisor".to_string(), |p| p.display().to_string());
+        let (routes, agent) = (count(free, "route"), crate::ROLE_AGENT);
+        recorder
+            .say(&format!("{routes} free; another agent joins with: {me} {agent} --attach {id}"));
     }
 }
 
@@ -202,10 +202,14 @@ const DRAIN_EVERY: Duration = Duration::from_millis(10);
 /// A command running this executable in `role` (the supervisor is also the world and the
 /// agent program, see [`crate::main`]).
 fn own_executable(role: &str) -> Result<Command> {
-    let me = std::env::current_exe().context("cannot find the supervisor's own executable")?;
-    let mut command = Command::new(me);
+    let mut command = Command::new(own_path()?);
     command.arg(role);
     Ok(command)
+}
+
+/// The path of this executable.
+fn own_path() -> Result<PathBuf> {
+    std::env::current_exe().context("cannot find the supervisor's own executable")
 }
 
 fn world_command(config: &RunConfig) -> Result<Command> {
