@@ -55,8 +55,8 @@ pub struct LearnerArgs {
     #[arg(long)]
     pub trace: Option<PathBuf>,
     /// Test aid, off by default, comma-separated: `crash-before-join` (abort before asking
-    /// to join), `crash-at-round=N` (abort), `hang-at-round=N` (stop answering, still obey
-    /// SIGTERM), `ignore-sigterm`.
+    /// to join), `join-after-file=PATH` (ask to join once PATH exists), `crash-at-round=N`
+    /// (abort), `hang-at-round=N` (stop answering, still obey SIGTERM), `ignore-sigterm`.
     #[arg(long)]
     pub fault: Option<String>,
 }
@@ -103,9 +103,11 @@ pub struct AttachArgs {
 }
 
 /// A test aid that makes the agent misbehave on purpose.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Fault {
     CrashBeforeJoin,
+    /// Waits for this file before asking to join, so a test can act before the agent does.
+    JoinAfterFile(PathBuf),
     CrashAtRound(u64),
     HangAtRound(u64),
     IgnoreSigterm,
@@ -126,11 +128,14 @@ fn parse_fault(spec: &str) -> Result<Fault> {
     match spec.split_once('=') {
         Some(("crash-at-round", n)) => Ok(Fault::CrashAtRound(round(n)?)),
         Some(("hang-at-round", n)) => Ok(Fault::HangAtRound(round(n)?)),
+        Some(("join-after-file", path)) if !path.is_empty() => {
+            Ok(Fault::JoinAfterFile(PathBuf::from(path)))
+        }
         None if spec == "crash-before-join" => Ok(Fault::CrashBeforeJoin),
         None if spec == "ignore-sigterm" => Ok(Fault::IgnoreSigterm),
         _ => bail!(
-            "--fault `{spec}`: expected crash-before-join, crash-at-round=N, hang-at-round=N or \
-             ignore-sigterm"
+            "--fault `{spec}`: expected crash-before-join, join-after-file=PATH, crash-at-round=N, \
+             hang-at-round=N or ignore-sigterm"
         ),
     }
 }
@@ -191,8 +196,13 @@ fn serve(
     if faults.contains(&Fault::CrashBeforeJoin) {
         std::process::abort();
     }
-    let request = JoinRequest::new(join_nonce(), wanted.map_or(ANY_SLOT, |s| s as u32));
     let world_timeout = Duration::from_millis(learner.world_timeout_ms);
+    for fault in &faults {
+        if let Fault::JoinAfterFile(path) = fault {
+            await_file(path, world_timeout)?;
+        }
+    }
+    let request = JoinRequest::new(join_nonce(), wanted.map_or(ANY_SLOT, |s| s as u32));
     let (slot, first) = await_admission(&ports, &request, world_timeout)?;
     let nonce = request.nonce;
     let setup = match setup {
@@ -310,6 +320,22 @@ fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
     })
 }
 
+/// Waits until `path` exists (fault injection: `join-after-file`), within `timeout`; leaves
+/// on SIGTERM.
+fn await_file(path: &Path, timeout: Duration) -> Result<()> {
+    let start = Instant::now();
+    while !path.exists() {
+        if termination_requested() {
+            bail!("stopped while waiting for {} (--fault join-after-file)", path.display());
+        }
+        if start.elapsed() > timeout {
+            bail!("--fault join-after-file: {} did not appear within {timeout:?}", path.display());
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Ok(())
+}
+
 /// Stops answering (fault injection) but still leaves on SIGTERM.
 fn hang() -> ! {
     loop {
@@ -395,5 +421,22 @@ impl Session {
             write_snapshot(part, &self.out, trial, &self.scenario, self.comm, &self.tree_text)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn faults_parse_and_a_bad_one_is_named() {
+        assert_eq!(
+            parse_faults("crash-at-round=7,join-after-file=/tmp/go,ignore-sigterm").unwrap(),
+            [Fault::CrashAtRound(7), Fault::JoinAfterFile("/tmp/go".into()), Fault::IgnoreSigterm]
+        );
+        let no_round = parse_faults("hang-at-round=soon").unwrap_err().to_string();
+        assert!(no_round.contains("`soon` is not a round number"), "{no_round}");
+        let no_path = parse_faults("join-after-file=").unwrap_err().to_string();
+        assert!(no_path.contains("--fault `join-after-file=`: expected"), "{no_path}");
     }
 }

@@ -405,6 +405,55 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
     assert_nothing_left(&id);
 }
 
+/// The starting slots belong to the agents the supervisor starts. A stray process that asks
+/// for one before its agent does (here UAV1 waits for the test's go) is answered as an
+/// attaching agent would be, once the run is under way (s3 has no free route: refused), and
+/// the run equals the in-process one byte for byte. Before, the stray process took the slot.
+#[test]
+fn a_stray_join_for_a_starting_slot_does_not_take_it() {
+    let (shm, inproc, gate_dir) = (scratch(), scratch(), scratch());
+    let gate = gate_dir.path().join("uav1-may-join");
+    let (id, out) = (run_id("stray"), shm.path().display().to_string());
+    let args =
+        ["--scenario", "s3", "--uavs", "2", "--episodes", "1000", "--trials", "2", "--seed", "97"];
+    let fault = format!("1=join-after-file={}", gate.display());
+    let run = Supervised::start(&run_args(&id, &out, &[&args[..], &["--fault", &fault]].concat()));
+    let log_file = shm.path().join("logs").join("world.log");
+    let noticed = "came from a process it did not start";
+    let start = Instant::now();
+    let mut stray = None;
+    let mut sent = 0;
+    // Until the world says it saw the stray request (bounded; the gate opens either way, so
+    // a failure leaves no process behind).
+    while start.elapsed() < Duration::from_secs(30) {
+        if std::fs::read_to_string(&log_file).unwrap_or_default().contains(noticed) {
+            break;
+        }
+        let ports = stray.get_or_insert_with(|| {
+            RunServices::open(&RunConfig::new(&id, SignalMode::Untouched))
+                .and_then(RunServices::into_agent)
+                .ok()
+        });
+        if let Some(ports) = ports {
+            ports.send_join(&JoinRequest::new(0x5eed, 0)).expect("send a join");
+            sent += 1;
+        } else {
+            stray = None;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    drop(stray);
+    std::fs::write(&gate, "").expect("open the gate");
+    let (status, report) = run.finish(DEADLOCK);
+    let log = world_log(shm.path());
+    assert!(log.contains(noticed), "the stray request ({sent} sent) was not noticed:\n{log}");
+    assert!(status.status.success(), "{report}");
+    assert!(log.contains("join refused"), "the stray request was not answered:\n{log}");
+    supervise(inproc.path(), &[&args[..], &words("--transport inproc")].concat());
+    assert_same_file(&shm.path().join("episodes.csv"), &inproc.path().join("episodes.csv"));
+    assert_nothing_left(&id);
+}
+
 #[test]
 fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
     let dir = scratch();

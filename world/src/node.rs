@@ -202,8 +202,9 @@ fn next_control(
 impl WorldNode {
     /// Waits until each agent the supervisor starts (slots 0..uavs) has asked to join, or
     /// the supervisor says its process ended before it did: the run goes on without those,
-    /// and their routes stay free for agents that attach. Returns whether the supervisor
-    /// asked to stop meanwhile.
+    /// and their routes stay free for agents that attach. A starting slot goes only to a
+    /// child of the supervisor ([`started_by`]); any other request waits for the first
+    /// round. Returns whether the supervisor asked to stop meanwhile.
     fn await_starting_agents(&mut self, uavs: usize, timeout: Duration) -> Result<bool> {
         let Self { ports, members, supervisor, .. } = self;
         let (mut gone, mut stop) = (0u64, false);
@@ -216,9 +217,19 @@ impl WorldNode {
                     if members.is_repeat(&request) {
                         continue;
                     }
-                    if request.nonce != 0 && slot < uavs && members.owners[slot] == 0 {
+                    let starting = request.nonce != 0 && slot < uavs && members.owners[slot] == 0;
+                    if starting && started_by(*supervisor, node) {
                         members.seat(slot, &request, node);
                     } else {
+                        if starting {
+                            tracing::warn!(
+                                uav = slot + 1,
+                                pid = ?node.pid(),
+                                "a join request for a slot the supervisor starts an agent on \
+                                 came from a process it did not start: it is answered as an \
+                                 attaching agent's, once the run is under way"
+                            );
+                        }
                         members.waiting.push((request, node));
                     }
                 }
@@ -498,12 +509,37 @@ fn process_alive(pid: u32) -> bool {
     if pid == 0 {
         return true;
     }
-    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
-        // The state follows the parenthesised command name, which may contain spaces.
-        Ok(stat) => stat
-            .rsplit_once(')')
-            .and_then(|(_, rest)| rest.split_whitespace().next())
-            .is_some_and(|state| state != "Z" && state != "X"),
-        Err(_) => false,
+    proc_stat(pid).is_some_and(|fields| fields.first().is_some_and(|s| s != "Z" && s != "X"))
+}
+
+/// Whether the process of `node` is a child of the supervisor, as the agents it starts
+/// are: only those take the starting slots, so a stray process that asks for one first
+/// cannot shut its agent out. Without a known supervisor every process counts.
+fn started_by(supervisor: Option<u32>, node: SenderNode) -> bool {
+    let Some(supervisor) = supervisor else { return true };
+    let parent = node.pid().and_then(proc_stat).and_then(|fields| fields.get(1)?.parse().ok());
+    parent == Some(supervisor)
+}
+
+/// The fields of `/proc/<pid>/stat` after the command name (state, parent pid, ...); the
+/// name is in parentheses and may itself contain spaces and parentheses. None if the
+/// process is gone.
+fn proc_stat(pid: u32) -> Option<Vec<String>> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let (_, fields) = stat.rsplit_once(')')?;
+    Some(fields.split_whitespace().map(str::to_owned).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn proc_stat_reads_the_parent_of_a_process_and_a_live_one_is_alive() {
+        let fields = proc_stat(std::process::id()).expect("this process has a stat file");
+        assert_eq!(fields[1], std::os::unix::process::parent_id().to_string(), "{fields:?}");
+        assert!(process_alive(std::process::id()));
+        assert!(process_alive(0), "an unknown pid is left to the deadline");
+        assert!(proc_stat(u32::MAX).is_none(), "no such process");
     }
 }
