@@ -429,16 +429,15 @@ fn a_stray_join_for_a_starting_slot_does_not_take_it() {
         if std::fs::read_to_string(&log_file).unwrap_or_default().contains(noticed) {
             break;
         }
-        let ports = stray.get_or_insert_with(|| {
-            RunServices::open(&RunConfig::new(&id, SignalMode::Untouched))
+        if stray.is_none() {
+            // The world creates the run's services as it starts.
+            stray = RunServices::open(&RunConfig::new(&id, SignalMode::Untouched))
                 .and_then(RunServices::into_agent)
-                .ok()
-        });
-        if let Some(ports) = ports {
+                .ok();
+        }
+        if let Some(ports) = &stray {
             ports.send_join(&JoinRequest::new(0x5eed, 0)).expect("send a join");
             sent += 1;
-        } else {
-            stray = None;
         }
         std::thread::sleep(Duration::from_millis(5));
     }
