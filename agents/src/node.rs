@@ -199,7 +199,11 @@ fn serve(
     let world_timeout = Duration::from_millis(learner.world_timeout_ms);
     for fault in &faults {
         if let Fault::JoinAfterFile(path) = fault {
-            await_file(path, world_timeout)?;
+            ports.waiter().wait(
+                &format_args!("{} (--fault join-after-file)", path.display()),
+                world_timeout,
+                || Ok(path.exists().then_some(())),
+            )?;
         }
     }
     let request = JoinRequest::new(join_nonce(), wanted.map_or(ANY_SLOT, |s| s as u32));
@@ -318,22 +322,6 @@ fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
             learn: true,
         }),
     })
-}
-
-/// Waits until `path` exists (fault injection: `join-after-file`), within `timeout`; leaves
-/// on SIGTERM.
-fn await_file(path: &Path, timeout: Duration) -> Result<()> {
-    let start = Instant::now();
-    while !path.exists() {
-        if termination_requested() {
-            bail!("stopped while waiting for {} (--fault join-after-file)", path.display());
-        }
-        if start.elapsed() > timeout {
-            bail!("--fault join-after-file: {} did not appear within {timeout:?}", path.display());
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    Ok(())
 }
 
 /// Stops answering (fault injection) but still leaves on SIGTERM.
