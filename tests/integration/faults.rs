@@ -1,15 +1,14 @@
 //! Membership and faults (issue 4) with real processes: attach, SIGKILLed agents, restart
 //! from snapshots, Ctrl-C, a killed world, and a rogue publisher. Every wait is bounded; a
-//! run that does not finish in time fails the test as a deadlock.
+//! run that does not finish in time fails the test with how far it got.
 
 use crate::harness::{
     assert_nothing_left, assert_same_file, episode_rows, pids_with, read, run_id, scratch, signal,
-    summary, supervise, wait_until, words, world_log, Supervised, AGENT,
+    summary, supervise, wait_until, words, world_log, Spawned, AGENT,
 };
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 const DEADLOCK: Duration = Duration::from_secs(120);
@@ -65,7 +64,7 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     std::fs::create_dir_all(&traces).expect("trace dir");
     let (id, out, trace_dir) =
         (run_id("attach"), dir.path().display().to_string(), traces.display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &[
@@ -86,10 +85,9 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     wait_until("the run's first agents", Duration::from_secs(30), || {
         !pids_with(&format!("--run-id {id} --uav 2")).is_empty()
     });
-    let mut attach = Command::new(AGENT);
-    attach.args(["--attach", &id, "--out", &out]);
-    let attached = attach.output().expect("run the attaching agent");
-    assert!(attached.status.success(), "{}", crate::harness::describe(&attach, &attached));
+    let (attached, attach_report) =
+        Spawned::start(AGENT, &["--attach", &id, "--out", &out]).finish(DEADLOCK);
+    assert!(attached.status.success(), "{attach_report}");
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
     let rows = episode_rows(dir.path());
@@ -132,7 +130,7 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
     for attempt in 0..20 {
         let dir = scratch();
         let (id, out) = (run_id(&format!("kill{attempt}")), dir.path().display().to_string());
-        let run = Supervised::start(&run_args(
+        let run = Spawned::supervisor(&run_args(
             &id,
             &out,
             &words("--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 51"),
@@ -164,7 +162,7 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
 fn an_agent_that_dies_before_joining_does_not_hold_up_the_run() {
     let dir = scratch();
     let (id, out) = (run_id("prejoin"), dir.path().display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &words("--scenario s3 --uavs 2 --episodes 500 --trials 1 --seed 52 --fault 2=crash-before-join"),
@@ -195,7 +193,7 @@ fn when_every_agent_fails_the_error_names_the_first_one_and_why() {
         let faults = [format!("1={fault}"), format!("2={fault}")];
         let extra = words("--scenario s3 --uavs 2 --episodes 500 --trials 1 --seed 53");
         let extra = [&extra[..], &["--fault", &faults[0], "--fault", &faults[1]]].concat();
-        let run = Supervised::start(&run_args(&id, &out, &extra));
+        let run = Spawned::supervisor(&run_args(&id, &out, &extra));
         let (status, report) = run.finish(DEADLOCK);
         assert_eq!(status.status.code(), Some(1), "{fault}: {report}");
         let stderr = String::from_utf8_lossy(&status.stderr);
@@ -216,7 +214,7 @@ fn when_every_agent_fails_the_error_names_the_first_one_and_why() {
 fn a_restarted_agent_goes_on_from_its_snapshot() {
     let dir = scratch();
     let (id, out) = (run_id("restart"), dir.path().display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &words("--scenario s3 --uavs 2 --episodes 12000 --trials 1 --seed 61 --restart on-failure --snapshot-every 200"),
@@ -254,7 +252,7 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
     for attempt in 0..10 {
         let dir = scratch();
         let (id, out) = (run_id(&format!("int{attempt}")), dir.path().display().to_string());
-        let run = Supervised::start(&run_args(
+        let run = Spawned::supervisor(&run_args(
             &id,
             &out,
             &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 71"),
@@ -286,7 +284,7 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
 fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     let dir = scratch();
     let (id, out) = (run_id("worldkill"), dir.path().display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 81"),
@@ -320,7 +318,7 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
     let (id, out) = (run_id("rogue"), shm.path().display().to_string());
     let args =
         ["--scenario", "s3", "--uavs", "2", "--episodes", "2000", "--trials", "2", "--seed", "91"];
-    let run = Supervised::start(&run_args(&id, &out, &args));
+    let run = Spawned::supervisor(&run_args(&id, &out, &args));
     let rogue_id = id.clone();
     let rogue = std::thread::spawn(move || {
         let ports = RunServices::open(&RunConfig::new(&rogue_id, SignalMode::Untouched))
@@ -417,7 +415,8 @@ fn a_stray_join_for_a_starting_slot_does_not_take_it() {
     let args =
         ["--scenario", "s3", "--uavs", "2", "--episodes", "1000", "--trials", "2", "--seed", "97"];
     let fault = format!("1=join-after-file={}", gate.display());
-    let run = Supervised::start(&run_args(&id, &out, &[&args[..], &["--fault", &fault]].concat()));
+    let run =
+        Spawned::supervisor(&run_args(&id, &out, &[&args[..], &["--fault", &fault]].concat()));
     let log_file = shm.path().join("logs").join("world.log");
     let noticed = "came from a process it did not start";
     let start = Instant::now();
@@ -457,7 +456,7 @@ fn a_stray_join_for_a_starting_slot_does_not_take_it() {
 fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
     let dir = scratch();
     let (id, out) = (run_id("hang"), dir.path().display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &words("--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 95 --fault 2=hang-at-round=3000,ignore-sigterm"),
@@ -482,7 +481,7 @@ fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
 fn a_subscriber_that_never_reads_the_records_fails_the_run_cleanly() {
     let dir = scratch();
     let (id, out) = (run_id("idle"), dir.path().display().to_string());
-    let run = Supervised::start(&run_args(
+    let run = Spawned::supervisor(&run_args(
         &id,
         &out,
         &words("--scenario s3 --uavs 2 --episodes 50000 --trials 4 --seed 3"),
@@ -515,5 +514,25 @@ fn a_subscriber_that_never_reads_the_records_fails_the_run_cleanly() {
     assert!(report.contains("`episodes` not drained for 10s"), "{report}");
     assert_eq!(summary(dir.path())["complete"], false);
     assert!(!episode_rows(dir.path()).is_empty(), "the records collected before are lost");
+    assert_nothing_left(&id);
+}
+
+/// A run past its bound is interrupted, not just killed: the failure shows how far it got,
+/// which tells a machine too loaded for the bound from a deadlock.
+#[test]
+fn an_overdue_run_is_interrupted_and_reported_with_its_progress() {
+    let dir = scratch();
+    let (id, out) = (run_id("overdue"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 73"),
+    ));
+    // Overdue as soon as it is under way: its world log exists.
+    wait_until("the world log", DEADLOCK, || dir.path().join("logs/world.log").exists());
+    let message = run.try_finish(Duration::from_millis(300)).expect_err("the run is overdue");
+    assert!(message.contains("it stopped on SIGINT"), "{message}");
+    assert!(message.contains("episode rows; world log, last 20 lines"), "{message}");
+    assert_eq!(summary(dir.path())["complete"], false, "{message}");
     assert_nothing_left(&id);
 }

@@ -2,9 +2,12 @@
 //! stdout and stderr, so a red test says what happened without a re-run.
 
 use serde_json::Value;
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 pub const SUPERVISOR: &str = env!("CARGO_BIN_EXE_supervisor");
 pub const AGENT: &str = env!("CARGO_BIN_EXE_agent");
@@ -35,24 +38,25 @@ pub fn describe(cmd: &Command, out: &Output) -> String {
     )
 }
 
-/// Runs `program args` to completion; panics with the full report unless it succeeded.
+/// Runs `program args` to completion (at most `RUN_BOUND`); panics with the full report
+/// unless it succeeded.
 pub fn run_ok(program: &str, args: &[&str]) -> Output {
-    let mut cmd = Command::new(program);
-    cmd.args(args);
-    let out = cmd.output().unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
-    assert!(out.status.success(), "expected success\n{}", describe(&cmd, &out));
+    let (out, report) = Spawned::start(program, args).finish(RUN_BOUND);
+    assert!(out.status.success(), "expected success\n{report}");
     out
 }
 
-/// Runs `program args` to completion; panics with the full report if it succeeded.
+/// Runs `program args` to completion (at most `RUN_BOUND`); panics with the full report if
+/// it succeeded.
 pub fn run_fail(program: &str, args: &[&str]) -> (Output, String) {
-    let mut cmd = Command::new(program);
-    cmd.args(args);
-    let out = cmd.output().unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
-    assert!(!out.status.success(), "expected failure\n{}", describe(&cmd, &out));
-    let report = describe(&cmd, &out);
+    let (out, report) = Spawned::start(program, args).finish(RUN_BOUND);
+    assert!(!out.status.success(), "expected failure\n{report}");
     (out, report)
 }
+
+/// The bound on any one run of a binary here: far beyond the longest even on a loaded
+/// machine, so only a hang reaches it.
+pub const RUN_BOUND: Duration = Duration::from_secs(600);
 
 /// Runs the supervisor expecting failure; returns its stderr, checked to be one error line
 /// and exit status 1.
@@ -156,54 +160,128 @@ pub fn signal(pid: u32, signal: libc::c_int) {
 }
 
 /// Polls `condition` every 10 ms for at most `timeout`; panics with `what` if it never holds.
-pub fn wait_until(what: &str, timeout: std::time::Duration, mut condition: impl FnMut() -> bool) {
-    let start = std::time::Instant::now();
+pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> bool) {
+    let start = Instant::now();
     while !condition() {
         assert!(start.elapsed() < timeout, "gave up after {timeout:?} waiting for {what}");
-        std::thread::sleep(std::time::Duration::from_millis(10));
+        std::thread::sleep(Duration::from_millis(10));
     }
 }
 
-/// A spawned supervisor, waited for with a bound; killed (and the test failed) past it.
-pub struct Supervised {
+/// A spawned binary under test, waited for with a bound. Its stdout and stderr are read
+/// as they come, so a chatty process never blocks on a full pipe while the test waits.
+pub struct Spawned {
     pub cmd: Command,
-    pub child: std::process::Child,
+    child: Child,
+    stdout: JoinHandle<Vec<u8>>,
+    stderr: JoinHandle<Vec<u8>>,
 }
 
-impl Supervised {
-    pub fn start(args: &[&str]) -> Supervised {
-        let mut cmd = Command::new(SUPERVISOR);
-        cmd.args(args).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
-        let child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start the supervisor: {e}"));
-        Supervised { cmd, child }
+impl Spawned {
+    pub fn start(program: &str, args: &[&str]) -> Spawned {
+        let mut cmd = Command::new(program);
+        cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+        let mut child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
+        let stdout = drain(child.stdout.take().expect("a piped stdout"));
+        let stderr = drain(child.stderr.take().expect("a piped stderr"));
+        Spawned { cmd, child, stdout, stderr }
+    }
+
+    pub fn supervisor(args: &[&str]) -> Spawned {
+        Spawned::start(SUPERVISOR, args)
     }
 
     pub fn pid(&self) -> u32 {
         self.child.id()
     }
 
-    /// Waits for the exit, at most `timeout` (a deadlock fails the test with the output).
-    pub fn finish(mut self, timeout: std::time::Duration) -> (Output, String) {
-        let start = std::time::Instant::now();
+    /// Waits for the exit, at most `timeout`; fails the test past it (see [`Self::try_finish`]).
+    pub fn finish(self, timeout: Duration) -> (Output, String) {
+        self.try_finish(timeout).unwrap_or_else(|overdue| panic!("{overdue}"))
+    }
+
+    /// Waits for the exit, at most `timeout`. Past it the process is interrupted as by
+    /// Ctrl-C (killed if that does not end it within `INTERRUPT_GRACE`) and the error holds
+    /// its output, the episodes recorded and the world log's tail: a run that was merely
+    /// slow (a loaded machine) then reads apart from one that was stuck.
+    pub fn try_finish(mut self, timeout: Duration) -> Result<(Output, String), String> {
+        if let Some(status) = self.exited_within(timeout) {
+            return Ok(self.output(status));
+        }
+        signal(self.pid(), libc::SIGINT);
+        let (status, then) = match self.exited_within(INTERRUPT_GRACE) {
+            Some(status) => (status, "it stopped on SIGINT"),
+            None => {
+                let _ = self.child.kill();
+                (self.child.wait().expect("wait on the killed process"), "SIGINT did not stop it")
+            }
+        };
+        let progress = self.progress();
+        let (_, report) = self.output(status);
+        Err(format!(
+            "the process did not finish within {timeout:?}; then {then}\n{report}\n{progress}"
+        ))
+    }
+
+    /// Polls every 10 ms for the exit, at most `timeout`.
+    fn exited_within(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let start = Instant::now();
         loop {
-            if self.child.try_wait().expect("wait on the supervisor").is_some() {
-                break;
+            if let Some(status) = self.child.try_wait().expect("wait on the process") {
+                return Some(status);
             }
             if start.elapsed() > timeout {
-                let _ = self.child.kill();
-                let out = self.child.wait_with_output().expect("collect output");
-                panic!(
-                    "the supervisor did not finish within {timeout:?} (deadlock?)\n{}",
-                    describe(&self.cmd, &out)
-                );
+                return None;
             }
-            std::thread::sleep(std::time::Duration::from_millis(10));
+            std::thread::sleep(Duration::from_millis(10));
         }
-        let out = self.child.wait_with_output().expect("collect output");
+    }
+
+    /// The exited process's output and its report (its pipes close with it, which ends the
+    /// readers).
+    fn output(self, status: ExitStatus) -> (Output, String) {
+        let read = |reader: JoinHandle<Vec<u8>>| reader.join().expect("an output reader");
+        let out = Output { status, stdout: read(self.stdout), stderr: read(self.stderr) };
         let report = describe(&self.cmd, &out);
         (out, report)
     }
+
+    /// How far a run got: the rows of its `episodes.csv` and the tail of its world log.
+    fn progress(&self) -> String {
+        let args: Vec<_> = self.cmd.get_args().collect();
+        let Some(out) = args.iter().position(|a| *a == "--out").and_then(|i| args.get(i + 1))
+        else {
+            return "(no --out: no results to show)".to_string();
+        };
+        let out = Path::new(out);
+        let rows = std::fs::read_to_string(out.join("episodes.csv"))
+            .map(|csv| format!("{} episode rows", csv.lines().count().saturating_sub(1)))
+            .unwrap_or_else(|e| format!("no episodes.csv ({e})"));
+        let log = std::fs::read_to_string(out.join("logs").join("world.log")).unwrap_or_default();
+        let lines: Vec<&str> = log.lines().collect();
+        let tail = match lines.len() {
+            0 => "(empty)".to_string(),
+            n => lines[n.saturating_sub(WORLD_LOG_TAIL)..].join("\n"),
+        };
+        format!("--- results: {rows}; world log, last {WORLD_LOG_TAIL} lines ---\n{tail}")
+    }
 }
+
+/// Reads `pipe` to its end on a thread of its own.
+fn drain(mut pipe: impl Read + Send + 'static) -> JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        // A read error ends the output early; what was read is still shown.
+        let _ = pipe.read_to_end(&mut bytes);
+        bytes
+    })
+}
+
+/// How long an overdue run gets to stop on SIGINT and write its partial results.
+const INTERRUPT_GRACE: Duration = Duration::from_secs(20);
+
+/// The world log lines an overdue run's report shows.
+const WORLD_LOG_TAIL: usize = 20;
 
 /// Parsed `episodes.csv`: (trial, agent, episode, start_tick, length, truncated) rows.
 pub fn episode_rows(out: &Path) -> Vec<[u64; 6]> {
@@ -223,11 +301,9 @@ pub fn episode_rows(out: &Path) -> Vec<[u64; 6]> {
 
 /// Asserts that nothing of run `id` is left: no process, no shared-memory file.
 pub fn assert_nothing_left(id: &str) {
-    wait_until(
-        &format!("the processes of run {id} to exit"),
-        std::time::Duration::from_secs(10),
-        || pids_with(id).is_empty(),
-    );
+    wait_until(&format!("the processes of run {id} to exit"), Duration::from_secs(10), || {
+        pids_with(id).is_empty()
+    });
     let left = flockstep_proto::transport::leftover_files(id).expect("list the run's files");
     assert!(left.is_empty(), "run {id} left files behind: {left:?}");
 }
