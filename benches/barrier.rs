@@ -4,8 +4,9 @@
 //! percentiles and CPU per round for several waiting strategies in one invocation, so their
 //! ratios are meaningful on the machine at hand.
 //!
-//! `cargo bench --bench barrier -- [--agents N].. [--seconds S] [--repeats K] [--policy S/Y[/T]]..`
-//! (S spins, Y yields, then yielding until T µs into the wait; T defaults to the product's)
+//! `cargo bench --bench barrier -- [--agents N].. [--seconds S] [--repeats K] [--policy S/Y[/T[/B]]]..`
+//! (S spins, Y yields, then yielding until T µs into the wait, and blocking at once for B ms
+//! after stalled yielding; T and B default to the product's)
 //! prints one line per configuration on stdout, e.g.
 //! `barrier agents=2 strategy=yield-block spins=0 yields=32 yield_for_us=200 rounds_per_s=...`.
 //! Without `--bench` (as under `cargo test --all-targets`) it does a short smoke run. The
@@ -78,11 +79,12 @@ fn parent(args: &[String]) -> Result<(), Error> {
             let rate = sorted[sorted.len() / 2].rate();
             let base = *baseline.get_or_insert(rate);
             println!(
-                "barrier agents={n} strategy={} spins={} yields={} yield_for_us={} vs_first={:.2} {}",
+                "barrier agents={n} strategy={} spins={} yields={} yield_for_us={} backoff_ms={} vs_first={:.2} {}",
                 strategy(policy),
                 policy.spins,
                 policy.yields,
                 policy.yield_for.as_micros(),
+                policy.backoff.as_millis(),
                 rate / base,
                 Measurement::describe(&sorted),
             );

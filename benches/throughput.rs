@@ -198,10 +198,11 @@ fn number(value: f64) -> String {
 fn print_raw(sorted: &[&Measurement], uavs: usize, options: &Options) {
     let policy = WaitPolicy::default();
     println!(
-        "throughput what=raw-barrier agents={uavs} spins={} yields={} yield_for_us={} seconds={} {}",
+        "throughput what=raw-barrier agents={uavs} spins={} yields={} yield_for_us={} backoff_ms={} seconds={} {}",
         policy.spins,
         policy.yields,
         policy.yield_for.as_micros(),
+        policy.backoff.as_millis(),
         options.seconds,
         Measurement::describe(sorted),
     );

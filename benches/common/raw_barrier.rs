@@ -70,8 +70,7 @@ impl ChildArgs {
     }
 
     fn to_args(&self) -> Vec<String> {
-        let p = &self.policy;
-        let policy = format!("{}/{}/{}", p.spins, p.yields, p.yield_for.as_micros());
+        let policy = format_policy(&self.policy);
         vec![
             self.run_id.clone(),
             self.parent.to_string(),
@@ -91,28 +90,34 @@ impl ChildArgs {
     }
 }
 
-/// A waiting strategy written `SPINS/YIELDS` or `SPINS/YIELDS/YIELD_FOR_US` (the rest, and
-/// a missing `YIELD_FOR_US`, as in the product's default): the `barrier` bench's `--policy`
-/// and the form in which a child gets its strategy.
+/// A waiting strategy written `SPINS/YIELDS[/YIELD_FOR_US[/BACKOFF_MS]]` (the rest, and
+/// the fields left out, as in the product's default): the `barrier` bench's `--policy` and
+/// the form in which a child gets its strategy.
 pub fn parse_policy(text: &str) -> Result<WaitPolicy, Error> {
-    let parts: Vec<&str> = text.split('/').collect();
-    let (spins, yields, yield_for) = match parts[..] {
-        [spins, yields] => (spins, yields, None),
-        [spins, yields, micros] => (spins, yields, Some(micros)),
-        _ => return Err(format!("--policy {text}: expected SPINS/YIELDS[/YIELD_FOR_US]").into()),
+    let fields: Vec<&str> = text.split('/').collect();
+    if !(2..=4).contains(&fields.len()) {
+        return Err(
+            format!("--policy {text}: expected SPINS/YIELDS[/YIELD_FOR_US[/BACKOFF_MS]]").into()
+        );
+    }
+    let number = |i: usize| -> Result<Option<u32>, String> {
+        let parse =
+            |field: &&str| field.parse().map_err(|e| format!("--policy {text}: `{field}`: {e}"));
+        fields.get(i).map(parse).transpose()
     };
-    let number =
-        |field: &str| field.parse::<u32>().map_err(|e| format!("--policy {text}: `{field}`: {e}"));
     let default = WaitPolicy::default();
     Ok(WaitPolicy {
-        spins: number(spins)?,
-        yields: number(yields)?,
-        yield_for: match yield_for {
-            Some(micros) => Duration::from_micros(number(micros)?.into()),
-            None => default.yield_for,
-        },
+        spins: number(0)?.unwrap_or(default.spins),
+        yields: number(1)?.unwrap_or(default.yields),
+        yield_for: number(2)?.map_or(default.yield_for, |us| Duration::from_micros(us.into())),
+        backoff: number(3)?.map_or(default.backoff, |ms| Duration::from_millis(ms.into())),
         ..default
     })
+}
+
+/// `policy` as [`parse_policy`] reads it.
+pub fn format_policy(p: &WaitPolicy) -> String {
+    format!("{}/{}/{}/{}", p.spins, p.yields, p.yield_for.as_micros(), p.backoff.as_millis())
 }
 
 /// Writes what the agents read of a round, as the product's world does (only the parts in

@@ -170,11 +170,12 @@ pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> 
 
 /// A spawned binary under test, waited for with a bound. Its stdout and stderr are read
 /// as they come, so a chatty process never blocks on a full pipe while the test waits.
+/// Dropped while still running (a test that failed before waiting for it), it is killed.
 pub struct Spawned {
     pub cmd: Command,
     child: Child,
-    stdout: JoinHandle<Vec<u8>>,
-    stderr: JoinHandle<Vec<u8>>,
+    /// The output readers, taken when the process has exited.
+    readers: Option<[JoinHandle<Vec<u8>>; 2]>,
 }
 
 impl Spawned {
@@ -184,7 +185,7 @@ impl Spawned {
         let mut child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
         let stdout = drain(child.stdout.take().expect("a piped stdout"));
         let stderr = drain(child.stderr.take().expect("a piped stderr"));
-        Spawned { cmd, child, stdout, stderr }
+        Spawned { cmd, child, readers: Some([stdout, stderr]) }
     }
 
     pub fn supervisor(args: &[&str]) -> Spawned {
@@ -239,9 +240,10 @@ impl Spawned {
 
     /// The exited process's output and its report (its pipes close with it, which ends the
     /// readers).
-    fn output(self, status: ExitStatus) -> (Output, String) {
+    fn output(&mut self, status: ExitStatus) -> (Output, String) {
+        let [stdout, stderr] = self.readers.take().expect("the output is collected once");
         let read = |reader: JoinHandle<Vec<u8>>| reader.join().expect("an output reader");
-        let out = Output { status, stdout: read(self.stdout), stderr: read(self.stderr) };
+        let out = Output { status, stdout: read(stdout), stderr: read(stderr) };
         let report = describe(&self.cmd, &out);
         (out, report)
     }
@@ -264,6 +266,15 @@ impl Spawned {
             n => lines[n.saturating_sub(WORLD_LOG_TAIL)..].join("\n"),
         };
         format!("--- results: {rows}; world log, last {WORLD_LOG_TAIL} lines ---\n{tail}")
+    }
+}
+
+impl Drop for Spawned {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
     }
 }
 

@@ -6,6 +6,7 @@
 
 use super::{termination_requested, Ipc, TransportError};
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use std::cell::Cell;
 use std::fmt::Display;
 use std::time::{Duration, Instant};
 
@@ -27,7 +28,30 @@ pub struct WaitPolicy {
     /// Longest single block on the listener; bounds how late a missed wake-up or a deadline
     /// can be noticed.
     pub slice: Duration,
+    /// How long the waiter blocks at once, without spinning or yielding, after
+    /// [`STALLS_TO_BACK_OFF`] waits within [`STALL_WINDOW`] whose yielding lasted over
+    /// [`STALLED_YIELDING`]:
+    /// the core went to a process outside the run for whole time slices, so the machine has
+    /// more runnable processes than cores (one such wait may be the host's doing). A
+    /// yielding peer is then queued behind that process, while a blocked one is woken ahead
+    /// of it: with two barriers and two CPU hogs on 2 cores, yielding made 473 rounds/s and
+    /// blocking 21 000. Zero never backs off.
+    pub backoff: Duration,
 }
+
+/// Yielding that lasts longer than this in one wait means a process outside the run took
+/// the core: a round's own work is µs, and the yielding is bounded by `yield_for` unless a
+/// yield itself is held up.
+pub const STALLED_YIELDING: Duration = Duration::from_millis(1);
+
+/// Stalled waits within [`STALL_WINDOW`] that make a waiter back off from yielding. On this
+/// VM a single one happened now and then without any foreign load (the host preempting a
+/// vCPU), and backing off on it cost unloaded runs rounds. Under foreign load most waits
+/// still end at once (p50 13 µs) but one in a few stalls for a time slice.
+pub const STALLS_TO_BACK_OFF: u32 = 3;
+
+/// See [`STALLS_TO_BACK_OFF`].
+pub const STALL_WINDOW: Duration = Duration::from_millis(50);
 
 impl WaitPolicy {
     /// Blocks on the event at once: the least CPU, the most wake-up latency.
@@ -36,6 +60,7 @@ impl WaitPolicy {
         yields: 0,
         yield_for: Duration::ZERO,
         slice: Duration::from_millis(10),
+        backoff: Duration::ZERO,
     };
 }
 
@@ -54,6 +79,7 @@ impl Default for WaitPolicy {
             yields: 32,
             yield_for: Duration::from_micros(YIELD_FOR_US),
             slice: Duration::from_millis(10),
+            backoff: Duration::from_millis(BACKOFF_MS),
         }
     }
 }
@@ -61,11 +87,21 @@ impl Default for WaitPolicy {
 /// How long [`WaitPolicy::default`] yields before it blocks.
 const YIELD_FOR_US: u64 = 200;
 
+/// How long [`WaitPolicy::default`] blocks at once after stalled yielding: long enough that
+/// the one stalled wait (a time slice, a few ms) that ends each backoff costs little, short
+/// enough that a run soon yields again once the machine is free.
+const BACKOFF_MS: u64 = 100;
+
 /// Waits on one wake-up event: spin, then yield, then block in slices, until `poll` has
 /// something or the deadline passes. Checks the SIGTERM latch on entry and after every block.
 pub struct Waiter {
     listener: Listener<Ipc>,
     policy: WaitPolicy,
+    /// Stalled waits since `first_stall`, which began the current [`STALL_WINDOW`].
+    stalls: Cell<u32>,
+    first_stall: Cell<Option<Instant>>,
+    /// Set by stalled yielding: until then every wait blocks at once (`policy.backoff`).
+    block_until: Cell<Option<Instant>>,
     run_id: String,
     service: String,
 }
@@ -77,7 +113,15 @@ impl Waiter {
         run_id: &str,
         service: &str,
     ) -> Waiter {
-        Waiter { listener, policy, run_id: run_id.into(), service: service.into() }
+        Waiter {
+            listener,
+            policy,
+            stalls: Cell::new(0),
+            first_stall: Cell::new(None),
+            block_until: Cell::new(None),
+            run_id: run_id.into(),
+            service: service.into(),
+        }
     }
 
     /// How this waiter spins, yields and blocks (the world times its death check by it).
@@ -98,6 +142,9 @@ impl Waiter {
     ) -> Result<T, TransportError> {
         let start = Instant::now();
         self.check_termination(what)?;
+        if self.block_until.get().is_some_and(|until| start < until) {
+            return self.block(what, timeout, start, poll);
+        }
         for _ in 0..self.policy.spins {
             if let Some(found) = poll()? {
                 return Ok(found);
@@ -108,13 +155,50 @@ impl Waiter {
         let yield_until = self.policy.yield_for.min(timeout);
         for yielded in 0u64.. {
             if let Some(found) = poll()? {
+                if yielded > 0 {
+                    self.note_yielding(start, start.elapsed());
+                }
                 return Ok(found);
             }
-            if yielded >= u64::from(self.policy.yields) && start.elapsed() >= yield_until {
-                break;
+            if yielded >= u64::from(self.policy.yields) {
+                let yielding = start.elapsed();
+                if yielding >= yield_until {
+                    self.note_yielding(start, yielding);
+                    break;
+                }
             }
             std::thread::yield_now();
         }
+        self.block(what, timeout, start, poll)
+    }
+
+    /// Counts the wait begun at `start` as stalled if its `yielding` was, and backs off from
+    /// yielding after [`STALLS_TO_BACK_OFF`] stalled ones within a [`STALL_WINDOW`].
+    fn note_yielding(&self, start: Instant, yielding: Duration) {
+        if yielding <= STALLED_YIELDING || self.policy.backoff.is_zero() {
+            return;
+        }
+        let in_window = self.first_stall.get().is_some_and(|first| start - first < STALL_WINDOW);
+        if !in_window {
+            self.first_stall.set(Some(start));
+            self.stalls.set(0);
+        }
+        self.stalls.set(self.stalls.get() + 1);
+        if self.stalls.get() >= STALLS_TO_BACK_OFF {
+            self.first_stall.set(None);
+            self.block_until.set(Some(start + yielding + self.policy.backoff));
+        }
+    }
+
+    /// The blocking phase of [`Self::wait`]: polls, then blocks on the listener in slices,
+    /// until `poll` has something or `timeout` (from `start`) passes.
+    fn block<T>(
+        &self,
+        what: &dyn Display,
+        timeout: Duration,
+        start: Instant,
+        mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
+    ) -> Result<T, TransportError> {
         loop {
             if let Some(found) = poll()? {
                 return Ok(found);
@@ -177,7 +261,7 @@ mod tests {
     #[test]
     fn an_answer_held_up_past_the_counted_yields_is_found_by_yielding() {
         let long = Duration::from_secs(60);
-        let policy = WaitPolicy { spins: 0, yields: 2, yield_for: long, slice: long };
+        let policy = WaitPolicy { yields: 2, yield_for: long, slice: long, ..WaitPolicy::BLOCK };
         let ports = world_waiting_with("held-up", policy);
         let mut polls = 0u32;
         // Had the waiter blocked after its 2 yields, it would have slept to the deadline
@@ -196,6 +280,7 @@ mod tests {
             yields: 3,
             yield_for: Duration::from_micros(100),
             slice: Duration::from_millis(10),
+            backoff: Duration::ZERO,
         };
         let ports = world_waiting_with("spent", policy);
         let mut polls = 0u32;
@@ -216,7 +301,7 @@ mod tests {
     #[test]
     fn the_deadline_ends_the_yielding_too() {
         let long = Duration::from_secs(60);
-        let policy = WaitPolicy { spins: 0, yields: 0, yield_for: long, slice: long };
+        let policy = WaitPolicy { yield_for: long, slice: long, ..WaitPolicy::BLOCK };
         let ports = world_waiting_with("deadline", policy);
         match ports.waiter().wait(&"nothing", Duration::from_millis(50), || Ok(None::<()>)) {
             // Measured by the waiter itself: yielding on to `yield_for` would report 60 s.
@@ -225,5 +310,50 @@ mod tests {
             }
             other => panic!("nothing to find ends in a timeout: {other:?}"),
         }
+    }
+
+    /// After `stalls` waits whose yielding stalled, a wait with an answer on its third poll: found while
+    /// yielding (which lasts to the deadline if need be), or a timeout if it blocks at once
+    /// (nothing notifies, so its one block lasts to the deadline and only 2 polls happen).
+    fn after_stalled_yielding(
+        tag: &str,
+        stalls: u32,
+        backoff: Duration,
+    ) -> Result<u32, TransportError> {
+        let long = Duration::from_secs(60);
+        let policy = WaitPolicy { yields: 1, yield_for: long, slice: long, backoff, spins: 0 };
+        let ports = world_waiting_with(tag, policy);
+        for _ in 0..stalls {
+            let mut polls = 0u32;
+            // The core held by another process for a time slice: the first poll takes 2 ms.
+            let stalled = ports.waiter().wait(&"a stalled answer", Duration::from_secs(5), || {
+                polls += 1;
+                if polls == 1 {
+                    std::thread::sleep(STALLED_YIELDING * 2);
+                }
+                Ok((polls == 2).then_some(()))
+            });
+            stalled.expect("found after one yield");
+        }
+        let mut polls = 0u32;
+        ports.waiter().wait(&"the next answer", Duration::from_millis(200), || {
+            polls += 1;
+            Ok((polls == 3).then_some(polls))
+        })
+    }
+
+    #[test]
+    fn after_stalled_yielding_a_waiter_blocks_at_once_for_its_backoff() {
+        let long = Duration::from_secs(60);
+        let waited = after_stalled_yielding("backoff", STALLS_TO_BACK_OFF, long);
+        assert!(
+            matches!(waited, Err(TransportError::Timeout { .. })),
+            "the wait after a stall yielded instead of blocking: {waited:?}"
+        );
+        let yielded = after_stalled_yielding("no-backoff", STALLS_TO_BACK_OFF, Duration::ZERO);
+        assert_eq!(yielded.expect("no backoff: found while yielding"), 3);
+        // Fewer stalls may be the host's doing: the waiter goes on yielding.
+        let yielded = after_stalled_yielding("too-few", STALLS_TO_BACK_OFF - 1, long);
+        assert_eq!(yielded.expect("too few stalls: found while yielding"), 3);
     }
 }
