@@ -30,12 +30,12 @@ pub struct WaitPolicy {
     pub slice: Duration,
     /// How long the waiter blocks at once, without spinning or yielding, after
     /// [`STALLS_TO_BACK_OFF`] waits within [`STALL_WINDOW`] whose yielding lasted over
-    /// [`STALLED_YIELDING`]:
-    /// the core went to a process outside the run for whole time slices, so the machine has
-    /// more runnable processes than cores (one such wait may be the host's doing). A
-    /// yielding peer is then queued behind that process, while a blocked one is woken ahead
-    /// of it: with two barriers and two CPU hogs on 2 cores, yielding made 473 rounds/s and
-    /// blocking 21 000. Zero never backs off.
+    /// [`STALLED_YIELDING`]: the core went to a process outside the run for whole time
+    /// slices, so the machine has more runnable processes than cores (one such wait may be
+    /// the host's doing). A yielding peer is then queued behind that process, while a
+    /// blocked one is woken ahead of it: with two barriers and two CPU hogs on 2 cores,
+    /// yielding made about 500 rounds/s and blocking 13 000 to 21 000 (docs/TRANSPORT.md).
+    /// Zero never backs off.
     pub backoff: Duration,
 }
 
@@ -44,9 +44,9 @@ pub struct WaitPolicy {
 /// yield itself is held up.
 pub const STALLED_YIELDING: Duration = Duration::from_millis(1);
 
-/// Stalled waits within [`STALL_WINDOW`] that make a waiter back off from yielding. On this
-/// VM a single one happened now and then without any foreign load (the host preempting a
-/// vCPU), and backing off on it cost unloaded runs rounds. Under foreign load most waits
+/// Stalled waits within [`STALL_WINDOW`] that make a waiter back off from yielding. On the
+/// 2-vCPU VM measured a single one happened now and then without any foreign load (the host
+/// preempting a vCPU), and backing off on it cost unloaded runs rounds. Under foreign load most waits
 /// still end at once (p50 13 µs) but one in a few stalls for a time slice.
 pub const STALLS_TO_BACK_OFF: u32 = 3;
 
