@@ -46,8 +46,8 @@ pub const STALLED_YIELDING: Duration = Duration::from_millis(1);
 
 /// Stalled waits within [`STALL_WINDOW`] that make a waiter back off from yielding. On the
 /// 2-vCPU VM measured a single one happened now and then without any foreign load (the host
-/// preempting a vCPU), and backing off on it cost unloaded runs rounds. Under foreign load most waits
-/// still end at once (p50 13 µs) but one in a few stalls for a time slice.
+/// preempting a vCPU), and backing off on it cost unloaded runs rounds. Under foreign load
+/// most waits still end at once (p50 13 µs) but one in a few stalls for a time slice.
 pub const STALLS_TO_BACK_OFF: u32 = 3;
 
 /// See [`STALLS_TO_BACK_OFF`].
@@ -312,9 +312,10 @@ mod tests {
         }
     }
 
-    /// After `stalls` waits whose yielding stalled, a wait with an answer on its third poll: found while
-    /// yielding (which lasts to the deadline if need be), or a timeout if it blocks at once
-    /// (nothing notifies, so its one block lasts to the deadline and only 2 polls happen).
+    /// After `stalls` waits whose yielding stalled, a wait with an answer on its third poll:
+    /// found while yielding (which lasts to the deadline if need be), or a timeout if it
+    /// blocks at once (nothing notifies, so its one block lasts to the deadline and only 2
+    /// polls happen).
     fn after_stalled_yielding(
         tag: &str,
         stalls: u32,
