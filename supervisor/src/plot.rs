@@ -2,6 +2,7 @@
 //! lines (greedy lengths, optima).
 
 use anyhow::{anyhow, Result};
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -23,10 +24,22 @@ impl Series {
     }
 }
 
-/// A horizontal reference line, e.g. "optimum 11.5".
+/// A horizontal reference line, e.g. "optimum (11.50)", or "UAV1 greedy after training
+/// (250.64; 967 of 4000 truncated)" with a detail.
 pub struct Reference {
     pub label: String,
     pub value: f64,
+    /// Shown after the value in the legend.
+    pub detail: Option<String>,
+}
+
+impl Reference {
+    fn legend(&self) -> String {
+        match &self.detail {
+            Some(detail) => format!("{} ({:.2}; {detail})", self.label, self.value),
+            None => format!("{} ({:.2})", self.label, self.value),
+        }
+    }
 }
 
 const COLORS: [RGBColor; 8] = [
@@ -84,11 +97,20 @@ pub fn plot_curves(
     for (i, r) in references.iter().enumerate() {
         let color = COLORS[(series.len() + i) % COLORS.len()];
         let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
+        let (dash, gap) = (6, 4);
         chart
-            .draw_series(DashedLineSeries::new([(0.0, r.value), (episodes, r.value)], 6, 4, style))
+            .draw_series(DashedLineSeries::new(
+                [(0.0, r.value), (episodes, r.value)],
+                dash,
+                gap,
+                style,
+            ))
             .map_err(|e| err(&e))?
-            .label(format!("{} ({:.2})", r.label, r.value))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            .label(r.legend())
+            // The legend's sample is dashed like the line it names.
+            .legend(move |(x, y)| {
+                DashedPathElement::new(vec![(x, y), (x + 20, y)], dash, gap, style)
+            });
     }
     chart
         .configure_series_labels()
@@ -111,8 +133,15 @@ mod tests {
         let path = dir.path().join("curve.svg");
         let values: Vec<f64> = (0..=10_000).map(|e| 100.0 - e as f64 / 200.0).collect();
         let series = [Series::from_values("UAV1".into(), &values)];
-        let optimum = [Reference { label: "optimum".into(), value: 11.5 }];
-        plot_curves(&path, "test", &series, &optimum).unwrap();
+        let references = [
+            Reference { label: "optimum".into(), value: 11.5, detail: None },
+            Reference {
+                label: "greedy".into(),
+                value: 250.636,
+                detail: Some("967 of 4000 truncated".into()),
+            },
+        ];
+        plot_curves(&path, "test", &series, &references).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         // The SVG backend writes each text on a line of its own.
         let texts: Vec<&str> = svg.lines().map(str::trim).collect();
@@ -120,5 +149,9 @@ mod tests {
         assert!(texts.contains(&"2000"), "no episode tick label 2000 among {numbers:?}");
         assert!(!texts.contains(&"2000.0"), "episode tick labels carry decimals");
         assert!(texts.contains(&"optimum (11.50)"), "the reference line's legend is missing");
+        assert!(
+            texts.contains(&"greedy (250.64; 967 of 4000 truncated)"),
+            "the reference line's detail is missing from its legend"
+        );
     }
 }

@@ -81,15 +81,18 @@ fn references(figure: Figure) -> Result<Vec<Reference>> {
         Figure::Fig10 => vec![Reference {
             label: "optimum".into(),
             value: optimum(&scenario("s1")?, 0).map_err(err)?.expected_ticks,
+            detail: None,
         }],
         Figure::Fig11 => vec![
             Reference {
                 label: "optimum without communication".into(),
                 value: optimum(&scenario("s2")?, 0).map_err(err)?.expected_ticks,
+                detail: None,
             },
             Reference {
                 label: "optimum knowing the target".into(),
                 value: optimum_with_known_target(&scenario("s2")?, 0).map_err(err)?.expected_ticks,
+                detail: None,
             },
         ],
     })

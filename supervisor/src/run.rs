@@ -130,9 +130,14 @@ fn write_results(
     let references: Vec<Reference> = (0..collector.agents())
         .take(PLOTTED_AGENTS)
         .filter_map(|a| {
+            let stats = collector.greedy(a)?;
             Some(Reference {
                 label: format!("UAV{} greedy after training", a + 1),
-                value: collector.greedy(a)?.mean(),
+                value: stats.mean(),
+                // A truncated episode counts the tick cap: the mean then understates a policy
+                // that never ends.
+                detail: (stats.truncated > 0)
+                    .then(|| format!("{} of {} truncated", stats.truncated, stats.episodes)),
             })
         })
         .collect();
