@@ -56,6 +56,8 @@ pub enum TransportError {
     },
     #[error("run `{run}`: no world created `{service}` within {waited:?}")]
     ServiceMissing { run: String, service: String, waited: Duration },
+    #[error("run `{run}`: the world created no publisher on `{service}` within {waited:?}")]
+    PublisherMissing { run: String, service: String, waited: Duration },
     #[error("run `{run}`: service `{service}` already exists: another live run uses this run id")]
     RunInUse { run: String, service: String },
     #[error("run `{run}`: {op} on `{service}` failed: {source}")]

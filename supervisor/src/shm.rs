@@ -298,7 +298,9 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
         identity.open_timeout = Duration::from_millis(100);
         match RunServices::open(&identity) {
             Ok(services) => return Ok(services.into_supervisor()?),
-            Err(TransportError::ServiceMissing { .. }) if Instant::now() < deadline => {}
+            Err(
+                TransportError::ServiceMissing { .. } | TransportError::PublisherMissing { .. },
+            ) if Instant::now() < deadline => {}
             Err(e) => return Err(e.into()),
         }
         if let Some(status) = world.status()? {

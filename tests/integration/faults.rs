@@ -501,6 +501,8 @@ fn a_subscriber_that_never_reads_the_records_fails_the_run_cleanly() {
                 Err(_) => std::thread::sleep(Duration::from_millis(5)),
             }
         };
+        // Connected to the world's publisher (`into_supervisor` waits for it), so the world
+        // cannot skip this reader: it must wait for it once its buffer is full.
         subscribed_tx.send(()).expect("the test waits for the idle reader");
         // Holds its subscriber, unread, until the run is over.
         let _ = released.recv_timeout(DEADLOCK);

@@ -105,17 +105,44 @@ impl RunServices {
         })
     }
 
-    /// The supervisor's ports.
+    /// The supervisor's ports, once its episode subscriber is connected to the world's
+    /// publisher (waiting for it at most `open_timeout`).
     pub fn into_supervisor(self) -> Result<SupervisorPorts, TransportError> {
         let waiter = self.waiter(&self.wake_supervisor, WAKE_SUPERVISOR)?;
+        let episodes = self.subscriber(&self.episodes, EPISODES)?;
+        self.connect_to_episode_publisher(&episodes)?;
         Ok(SupervisorPorts {
-            episodes: self.subscriber(&self.episodes, EPISODES)?,
+            episodes,
             received: std::cell::RefCell::new(None),
             control: self.publisher(&self.control, CONTROL)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
             services: self,
         })
+    }
+
+    /// iceoryx2 connects a subscriber made before the publisher only when the subscriber
+    /// next receives or updates its connections, and a publisher skips an unconnected
+    /// subscriber once that subscriber's buffer is full: the records sent to it are lost,
+    /// even under `RetryUntilDelivered`. Connecting here, before the supervisor starts any
+    /// agent, means no record is sent before the connection exists.
+    fn connect_to_episode_publisher(
+        &self,
+        episodes: &Subscriber<Ipc, EpisodeBatch, ()>,
+    ) -> Result<(), TransportError> {
+        let start = Instant::now();
+        while self.episodes.dynamic_config().number_of_publishers() == 0 {
+            let waited = start.elapsed();
+            if waited >= self.run.open_timeout || termination_requested() {
+                return Err(TransportError::PublisherMissing {
+                    run: self.run.run_id.clone(),
+                    service: EPISODES.into(),
+                    waited,
+                });
+            }
+            std::thread::sleep(super::run_services::OPEN_RETRY);
+        }
+        episodes.update_connections().map_err(|e| self.port_err(EPISODES, "connecting", e))
     }
 
     /// A publisher on `service` that loans one sample at a time.
@@ -554,5 +581,60 @@ impl SupervisorPorts {
     /// Woken by episode records.
     pub fn waiter(&self) -> &Waiter {
         &self.waiter
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::transport::{RunConfig, RunServices, SignalMode, TransportError, EPISODE_BUFFER};
+    use crate::EpisodeReport;
+    use iceoryx2::prelude::PortFactory;
+    use std::time::{Duration, Instant};
+
+    const BOUND: Duration = Duration::from_secs(10);
+
+    /// Without the connection made in `into_supervisor`, the world skipped a supervisor
+    /// that opened the run before the world's publisher existed and had not received yet:
+    /// its records past a full buffer were lost and the flush below succeeded.
+    #[test]
+    fn a_supervisor_that_opened_before_the_publisher_is_never_skipped() {
+        let mut run =
+            RunConfig::new(format!("early-{}", std::process::id()), SignalMode::Untouched);
+        run.report_timeout = Duration::from_millis(50);
+        run.open_timeout = BOUND;
+        let services = RunServices::create(&run).expect("a run of its own");
+        let (connected_tx, connected) = std::sync::mpsc::channel();
+        let (release_tx, release) = std::sync::mpsc::channel::<()>();
+        let opener = {
+            let run = run.clone();
+            // The ports are not Send: the thread opens and holds them, never reading.
+            std::thread::spawn(move || {
+                let ports = RunServices::open(&run)?.into_supervisor()?;
+                connected_tx.send(()).expect("the test waits for the supervisor");
+                let _ = release.recv_timeout(BOUND);
+                drop(ports);
+                Ok::<(), TransportError>(())
+            })
+        };
+        let start = Instant::now();
+        while services.episodes.dynamic_config().number_of_subscribers() == 0 {
+            assert!(start.elapsed() < BOUND, "the supervisor made no subscriber within {BOUND:?}");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let mut world = services.into_world().expect("the world's ports");
+        if connected.recv_timeout(BOUND).is_err() {
+            panic!("the supervisor did not connect: {:?}", opener.join());
+        }
+        for _ in 0..EPISODE_BUFFER {
+            world.queue_episode(&EpisodeReport::default()).expect("room in the buffer");
+        }
+        world.queue_episode(&EpisodeReport::default()).expect("a batch of its own");
+        let flushed = world.flush_episodes();
+        release_tx.send(()).expect("the supervisor holds on");
+        opener.join().expect("the supervisor's thread").expect("the supervisor's ports");
+        assert!(
+            matches!(flushed, Err(TransportError::ReportsStalled { .. })),
+            "the idle supervisor was skipped: {flushed:?}"
+        );
     }
 }

@@ -26,7 +26,7 @@ pub const MAX_NODES: usize = MAX_AGENTS + 2 + SPARE;
 /// (in batches of [`EPISODE_BATCH`]).
 pub const EPISODE_BUFFER: usize = 8192;
 /// Pause between attempts while the world has not created a service yet.
-const OPEN_RETRY: Duration = Duration::from_millis(5);
+pub(super) const OPEN_RETRY: Duration = Duration::from_millis(5);
 
 /// Limits and QoS of one publish/subscribe service. The world creates the service with them;
 /// openers require at least them, so a binary built with other limits fails at open time with
