@@ -115,6 +115,10 @@ pub struct Collector {
     periodic: Vec<Vec<Totals>>,
     /// Ticks of every trial, counting training and evaluation.
     ticks: Vec<u64>,
+    /// The episode whose report comes next, per trial and phase (training, evaluation): the
+    /// world numbers each phase's episodes of a trial from 0 and reports every one in
+    /// order, so any other number means records were lost on the way.
+    next_episode: Vec<[u64; 2]>,
 }
 
 impl Collector {
@@ -136,6 +140,7 @@ impl Collector {
             plan,
             periodic: vec![vec![(0, 0, 0); plan.blocks as usize]; agents],
             ticks: vec![0; trials],
+            next_episode: vec![[0; 2]; trials],
         })
     }
 
@@ -150,6 +155,15 @@ impl Collector {
         }
         let phase = Phase::from_u8(report.phase)
             .with_context(|| format!("episode report with phase {}", report.phase))?;
+        let next = &mut self.next_episode[trial][phase as usize];
+        if report.episode != *next {
+            anyhow::bail!(
+                "episode records lost or out of order: trial {trial} reported {phase:?} episode \
+                 {} where episode {next} was due",
+                report.episode
+            );
+        }
+        *next += 1;
         let end = slots_in(report.members)
             .map(|slot| report.start_tick + u64::from(report.lengths[slot]))
             .max()
@@ -283,5 +297,34 @@ impl GreedyStats {
     /// Mean over trials of each trial's mean greedy length.
     pub fn mean(&self) -> f64 {
         self.per_trial.iter().sum::<f64>() / self.per_trial.len().max(1) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(trial: u32, phase: Phase, episode: u64) -> EpisodeReport {
+        let mut report = EpisodeReport { trial, phase: phase as u8, episode, ..Default::default() };
+        report.members = 1;
+        report.lengths[0] = 13;
+        report
+    }
+
+    #[test]
+    fn a_report_that_skips_an_episode_is_an_error_naming_both() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        for (trial, phase, episode) in
+            [(0, Phase::Train, 0), (1, Phase::Train, 0), (0, Phase::Train, 1), (0, Phase::Eval, 0)]
+        {
+            collector.record(&report(trial, phase, episode)).expect("the next episode");
+        }
+        let error = collector.record(&report(1, Phase::Train, 2)).unwrap_err().to_string();
+        assert!(
+            error.contains("trial 1 reported Train episode 2 where episode 1 was due"),
+            "{error}"
+        );
+        assert_eq!(collector.train_lengths()[0][1], vec![13], "the bad report was not recorded");
     }
 }
