@@ -296,8 +296,8 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
     loop {
         let mut identity = RunIdentity::new(&config.run_id, SignalMode::Untouched);
         identity.open_timeout = Duration::from_millis(100);
-        match RunServices::open(&identity) {
-            Ok(services) => return Ok(services.into_supervisor()?),
+        match RunServices::open(&identity).and_then(RunServices::into_supervisor) {
+            Ok(ports) => return Ok(ports),
             Err(
                 TransportError::ServiceMissing { .. } | TransportError::PublisherMissing { .. },
             ) if Instant::now() < deadline => {}
