@@ -1,9 +1,17 @@
 //! Learning-curve plots (SVG, plotters): one line per curve, optional horizontal reference
 //! lines (greedy lengths, optima).
+//!
+//! A plot has two panels. The first shows the whole run; its scale is set by the first
+//! episodes (often ten times the final length), so the differences a researcher compares
+//! late in training (a tick or two between communication modes) are flat lines there. The
+//! second shows the rest of the run after its first tenth, with the episode-length axis
+//! fitted to the curves there and to the reference lines near them.
 
 use anyhow::{anyhow, Result};
+use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
+use std::ops::Range;
 use std::path::Path;
 
 /// A named line of the plot: (iteration, episode length) points.
@@ -13,14 +21,18 @@ pub struct Series {
 }
 
 impl Series {
-    /// A line with one value per iteration, thinned to at most ~2000 points (the curves are
-    /// smoothed already, and it keeps the SVG small).
+    /// A line with one value per iteration, thinned to at most 2001 points (the curves are
+    /// smoothed already, and it keeps the SVG small); the last value is always kept, so the
+    /// line reaches the end of the run.
     pub fn from_values(label: String, values: &[f64]) -> Series {
-        let step = (values.len() / 2000).max(1);
-        Series {
-            label,
-            points: values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y)).collect(),
+        let step = values.len().div_ceil(2000).max(1);
+        let mut points: Vec<(f64, f64)> =
+            values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y)).collect();
+        let last = values.len().saturating_sub(1);
+        if !last.is_multiple_of(step) {
+            points.push((last as f64, values[last]));
         }
+        Series { label, points }
     }
 }
 
@@ -53,7 +65,15 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-/// Draws `series` (x = iteration, y = episode length) and `references` into an SVG file.
+/// The share of the run the second panel leaves out.
+const ZOOM_SKIPS: f64 = 0.1;
+
+/// Image size, and the height of the first panel (of the area below the title).
+const SIZE: (u32, u32) = (960, 960);
+const FIRST_PANEL_HEIGHT: u32 = 530;
+
+/// Draws `series` (x = iteration, y = episode length) and `references` into an SVG file:
+/// the whole run, then the run after its first tenth with a fitted episode-length axis.
 pub fn plot_curves(
     path: &Path,
     title: &str,
@@ -67,60 +87,118 @@ pub fn plot_curves(
         .flat_map(|s| s.points.iter().map(|p| p.1))
         .chain(references.iter().map(|r| r.value));
     let top = all.fold(1.0f64, f64::max) * 1.05;
-    let root = SVGBackend::new(path, (960, 600)).into_drawing_area();
+    let root = SVGBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 22))
-        .margin(16)
-        .x_label_area_size(44)
-        .y_label_area_size(56)
-        .build_cartesian_2d(0f64..episodes, 0f64..top)
-        .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
-        .x_desc("iterations (episodes)")
-        .y_desc("episode length (ticks)")
-        // Episodes are whole numbers.
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .draw()
-        .map_err(|e| err(&e))?;
-    for (i, s) in series.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()];
-        chart
-            .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
-            .map_err(|e| err(&e))?
-            .label(s.label.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+    let root = root.titled(title, ("sans-serif", 22)).map_err(|e| err(&e))?;
+    let (full, zoomed) = root.split_vertically(FIRST_PANEL_HEIGHT);
+    let whole = Panel { caption: None, x: 0.0..episodes, y: 0.0..top, legend: true };
+    whole.draw(&full, series, references).map_err(|e| err(&e))?;
+    let from = (episodes * ZOOM_SKIPS).round();
+    if let Some(y) = zoom(series, references, from) {
+        let caption = format!("after episode {from:.0}, episode length axis fitted");
+        let tail = Panel { caption: Some(caption), x: from..episodes, y, legend: false };
+        tail.draw(&zoomed, series, references).map_err(|e| err(&e))?;
     }
-    for (i, r) in references.iter().enumerate() {
-        let color = COLORS[(series.len() + i) % COLORS.len()];
-        let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
-        let (dash, gap) = (6, 4);
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(0.0, r.value), (episodes, r.value)],
-                dash,
-                gap,
-                style,
-            ))
-            .map_err(|e| err(&e))?
-            .label(r.legend())
-            // The legend's sample is dashed like the line it names.
-            .legend(move |(x, y)| {
-                DashedPathElement::new(vec![(x, y), (x + 20, y)], dash, gap, style)
-            });
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
+}
+
+/// The episode-length range of the second panel: the curves from episode `from` on, and the
+/// references up to twice their highest point (an optimum below the curves is what they are
+/// read against; the greedy mean of a policy that loops, often near the tick cap, would
+/// squash them). None when fewer than two points are that late.
+fn zoom(series: &[Series], references: &[Reference], from: f64) -> Option<Range<f64>> {
+    let late = series.iter().flat_map(|s| s.points.iter().filter(|p| p.0 >= from).map(|p| p.1));
+    let (count, lo, hi) = late
+        .fold((0usize, f64::INFINITY, f64::NEG_INFINITY), |(n, lo, hi), y| {
+            (n + 1, lo.min(y), hi.max(y))
+        });
+    if count < 2 {
+        return None;
+    }
+    let (lo, hi) = references
+        .iter()
+        .map(|r| r.value)
+        .filter(|&v| v <= 2.0 * hi)
+        .fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let pad = (hi - lo).max(1.0) * 0.05;
+    Some((lo - pad).max(0.0)..hi + pad)
+}
+
+/// One chart of a plot: its ranges, and whether it carries the legend.
+struct Panel {
+    caption: Option<String>,
+    x: Range<f64>,
+    y: Range<f64>,
+    legend: bool,
+}
+
+type DrawResult = Result<(), DrawingAreaErrorKind<std::io::Error>>;
+
+impl Panel {
+    /// Draws the series, then as dashed lines the references within the panel's range, each
+    /// in the color its place in `references` gives it in every panel.
+    fn draw(
+        &self,
+        area: &DrawingArea<SVGBackend, Shift>,
+        series: &[Series],
+        references: &[Reference],
+    ) -> DrawResult {
+        let mut builder = ChartBuilder::on(area);
+        if let Some(caption) = &self.caption {
+            builder.caption(caption, ("sans-serif", 16));
+        }
+        let mut chart = builder
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(56)
+            .build_cartesian_2d(self.x.clone(), self.y.clone())?;
+        chart
+            .configure_mesh()
+            .x_desc("iterations (episodes)")
+            .y_desc("episode length (ticks)")
+            // Episodes are whole numbers.
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .draw()?;
+        let x = self.x.clone();
+        for (i, s) in series.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            let points = s.points.iter().copied().filter(|p| p.0 >= x.start);
+            chart
+                .draw_series(LineSeries::new(points, color.stroke_width(2)))?
+                .label(s.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
+        let shown = references.iter().enumerate().filter(|(_, r)| self.y.contains(&r.value));
+        for (i, r) in shown {
+            let color = COLORS[(series.len() + i) % COLORS.len()];
+            let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
+            let (dash, gap) = (6, 4);
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x.start, r.value), (x.end, r.value)],
+                    dash,
+                    gap,
+                    style,
+                ))?
+                .label(r.legend())
+                // The legend's sample is dashed like the line it names.
+                .legend(move |(x, y)| {
+                    DashedPathElement::new(vec![(x, y), (x + 20, y)], dash, gap, style)
+                });
+        }
+        if self.legend {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()?;
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -153,5 +231,63 @@ mod tests {
             texts.contains(&"greedy (250.64; 967 of 4000 truncated)"),
             "the reference line's detail is missing from its legend"
         );
+    }
+
+    #[test]
+    fn thinned_lines_reach_the_last_episode() {
+        for len in [1usize, 1999, 4000, 5001, 10_000] {
+            let values: Vec<f64> = (0..len).map(|e| e as f64).collect();
+            let series = Series::from_values("UAV1".into(), &values);
+            assert!(series.points.len() <= 2001, "{len} values kept {}", series.points.len());
+            assert_eq!(series.points.last(), Some(&((len - 1) as f64, (len - 1) as f64)));
+        }
+        assert!(Series::from_values("none".into(), &[]).points.is_empty());
+    }
+
+    /// 100 ticks for the first 1000 episodes, then between 12 and 13.
+    fn learned_by_episode_1000() -> Series {
+        let values: Vec<f64> =
+            (0..10_000).map(|e| if e < 1000 { 100.0 } else { 12.0 + (e % 2) as f64 }).collect();
+        Series::from_values("UAV1".into(), &values)
+    }
+
+    #[test]
+    fn the_second_panel_fits_the_late_curves_and_the_references_near_them() {
+        let curves = [learned_by_episode_1000()];
+        let range = zoom(&curves, &[], 1000.0).unwrap();
+        assert!(range.start > 11.5 && range.start < 12.0, "{range:?} is not fitted to 12..13");
+        assert!(range.end > 13.0 && range.end < 13.5, "{range:?} is not fitted to 12..13");
+        let optimum = Reference { label: "optimum".into(), value: 8.0, detail: None };
+        let looping = Reference { label: "greedy".into(), value: 250.0, detail: None };
+        let range = zoom(&curves, &[optimum, looping], 1000.0).unwrap();
+        assert!(range.start < 8.0 && range.start > 7.0, "{range:?} leaves out the optimum");
+        assert!(range.end > 13.0 && range.end < 13.5, "{range:?} makes room for the loop");
+    }
+
+    /// The texts of the SVG `plot_curves` draws (the backend writes each on a line of its own).
+    fn drawn_texts(series: &[Series], references: &[Reference]) -> Vec<String> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("curve.svg");
+        plot_curves(&path, "test", series, references).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        svg.lines().map(|l| l.trim().to_string()).collect()
+    }
+
+    #[test]
+    fn the_second_panel_starts_after_the_first_tenth_of_the_run() {
+        let texts = drawn_texts(&[learned_by_episode_1000()], &[]);
+        let caption = "after episode 1000, episode length axis fitted";
+        assert!(texts.iter().any(|t| t == caption), "no panel captioned `{caption}`");
+        // Only the fitted axis of the second panel has a tick between 12 and 13.
+        assert!(texts.iter().any(|t| t == "12.5"), "no tick label 12.5 in {texts:?}");
+    }
+
+    #[test]
+    fn a_run_of_one_episode_gets_one_panel() {
+        let one = Series { label: "UAV1".into(), points: vec![(0.0, 40.0)] };
+        assert!(zoom(std::slice::from_ref(&one), &[], 0.0).is_none());
+        let texts = drawn_texts(&[one], &[]);
+        assert!(!texts.iter().any(|t| t.starts_with("after episode")), "a second panel: {texts:?}");
+        assert!(texts.iter().any(|t| t == "UAV1"), "the legend is missing");
     }
 }
