@@ -3,8 +3,8 @@
 //! run that does not finish in time fails the test with how far it got.
 
 use crate::harness::{
-    assert_nothing_left, assert_same_file, episode_rows, pids_with, read, run_id, scratch, signal,
-    summary, supervise, wait_until, words, world_log, Spawned, AGENT,
+    assert_nothing_left, assert_same_file, catches, episode_rows, pids_with, read, run_id, scratch,
+    signal, summary, supervise, wait_until, words, world_log, Spawned, AGENT,
 };
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
@@ -257,7 +257,11 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
             &out,
             &words("--scenario s3 --uavs 2 --episodes 50000 --trials 2 --seed 71"),
         ));
-        std::thread::sleep(Duration::from_millis(100 + random.below(1500)));
+        wait_until("the supervisor to handle SIGINT", Duration::from_secs(30), || {
+            catches(run.pid(), libc::SIGINT)
+        });
+        // Anywhere from start-up (the world not yet up) to well into training.
+        std::thread::sleep(Duration::from_millis(random.below(1500)));
         signal(run.pid(), libc::SIGINT);
         let (status, report) = run.finish(DEADLOCK);
         assert_eq!(

@@ -159,6 +159,17 @@ pub fn signal(pid: u32, signal: libc::c_int) {
     }
 }
 
+/// Whether process `pid` has a handler installed for `signal` (`SigCgt` in
+/// `/proc/<pid>/status`): before that, the signal's default action would kill it.
+pub fn catches(pid: u32, signal: libc::c_int) -> bool {
+    let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else { return false };
+    status
+        .lines()
+        .find_map(|line| line.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (signal - 1)) != 0)
+}
+
 /// Polls `condition` every 10 ms for at most `timeout`; panics with `what` if it never holds.
 pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> bool) {
     let start = Instant::now();

@@ -12,7 +12,8 @@ fn memoryless_optimum(name: &str) -> f64 {
     optimum(&scenario, 0).expect("an optimum").expected_ticks
 }
 
-fn greedy(scenario: &str, uavs: &str, comm: &str, episodes: &str) -> (f64, f64) {
+/// UAV1's mean greedy episode length after training (in process, 4 trials, seed 1).
+fn greedy(scenario: &str, uavs: &str, comm: &str, episodes: &str) -> f64 {
     let dir = scratch();
     let s = supervise(
         dir.path(),
@@ -38,30 +39,27 @@ fn greedy(scenario: &str, uavs: &str, comm: &str, episodes: &str) -> (f64, f64) 
         0.0,
         "a greedy UAV1 episode hit the tick cap: {s:#}"
     );
-    (
-        number(&s, "greedy_episode_length", 0),
-        s["final_mean_episode_length"].as_f64().expect("final mean"),
-    )
+    number(&s, "greedy_episode_length", 0)
 }
 
 #[test]
 fn s1_greedy_policy_reaches_the_exact_optimum() {
     let best = memoryless_optimum("s1");
     assert_eq!(best, 13.0, "SPEC: the s1 optimum is 13 ticks");
-    let (greedy, _) = greedy("s1", "1", "none", "3000");
+    let greedy = greedy("s1", "1", "none", "3000");
     assert_eq!(greedy, best);
 }
 
 #[test]
 fn s2_greedy_policy_is_within_five_percent_of_the_optimum() {
     let best = memoryless_optimum("s2");
-    let (greedy, _) = greedy("s2", "1", "none", "5000");
+    let greedy = greedy("s2", "1", "none", "5000");
     assert!((greedy - best).abs() <= 0.05 * best, "greedy {greedy} vs optimum {best}");
 }
 
 #[test]
 fn s3_flags_shorten_uav1_greedy_episodes_below_s2_without_communication() {
-    let (alone, _) = greedy("s2", "1", "none", "20000");
-    let (informed, _) = greedy("s3", "2", "flags", "20000");
+    let alone = greedy("s2", "1", "none", "20000");
+    let informed = greedy("s3", "2", "flags", "20000");
     assert!(informed < alone, "s3 flags greedy {informed} is not below s2 none {alone}");
 }

@@ -3,11 +3,12 @@
 //! isolation of two simultaneous runs, nothing left in shared memory afterwards, and each
 //! process's own peak memory in the summary.
 
-use crate::harness::{assert_same_file, read, run_id, scratch, supervise, words, SUPERVISOR};
+use crate::harness::{
+    assert_same_file, read, run_id, scratch, supervise, words, Spawned, RUN_BOUND,
+};
 use flockstep_proto::transport::leftover_files;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
-use std::process::Command;
 
 /// Runs `args` with both transports; returns (shm dir, inproc dir).
 fn both(args: &[&str], tag: &str) -> (tempfile::TempDir, tempfile::TempDir) {
@@ -172,19 +173,17 @@ fn two_simultaneous_runs_stay_independent() {
         [&words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed")[..], &[seeds[i]]]
             .concat()
     };
-    let children: Vec<_> = (0..2)
+    let runs: Vec<Spawned> = (0..2)
         .map(|i| {
-            let mut cmd = Command::new(SUPERVISOR);
-            cmd.args(run(i))
-                .args(["--transport", "shm", "--run-id", &ids[i], "--quiet", "--out"])
-                .arg(dirs[i].path());
-            let child = cmd.spawn().expect("start a supervisor");
-            (cmd, child)
+            let out = dirs[i].path().display().to_string();
+            let mut args = run(i);
+            args.extend(["--transport", "shm", "--run-id", &ids[i], "--quiet", "--out", &out]);
+            Spawned::supervisor(&args)
         })
         .collect();
-    for (cmd, child) in children {
-        let out = child.wait_with_output().expect("wait for a supervisor");
-        assert!(out.status.success(), "{}", crate::harness::describe(&cmd, &out));
+    for run in runs {
+        let (out, report) = run.finish(RUN_BOUND);
+        assert!(out.status.success(), "{report}");
     }
     for i in 0..2 {
         let twin = scratch();
