@@ -101,7 +101,7 @@ pub struct TrialAgent {
     open: Option<(u8, u64)>,
     /// This agent ran `A-endEpisode` in the open episode and hovers.
     finished: bool,
-    /// Training episodes closed so far.
+    /// Training episodes closed so far, those behind a restored snapshot included.
     trained_episodes: u64,
     /// Peers taking part in this trial when last observed (departures void what was heard).
     peers: u64,
@@ -195,8 +195,7 @@ impl TrialAgent {
     fn hear(&mut self, obs: TrialObservation<'_>, live: u64) -> Result<(), FieldError> {
         let header = obs.header;
         let peers = header.members & live & !(1 << self.slot);
-        self.comm.hear(header.tick, peers, header.flags_changed, obs.agents)?;
-        Ok(())
+        self.comm.hear(header.tick, peers, header.flags_changed, obs.agents)
     }
 
     /// Closes the open episode, if any. If this agent did not finish it, the episode was
@@ -245,9 +244,15 @@ impl TrialAgent {
         self.slot
     }
 
-    /// Training episodes this agent has completed in this trial.
+    /// Training episodes behind this agent's tables in this trial (those of the snapshot it
+    /// was restored from included).
     pub fn trained_episodes(&self) -> u64 {
         self.trained_episodes
+    }
+
+    /// Sets the training episodes behind the tables (restoring a snapshot).
+    pub(crate) fn set_trained_episodes(&mut self, episodes: u64) {
+        self.trained_episodes = episodes;
     }
 
     pub fn tree(&self) -> &Tree {
@@ -313,11 +318,6 @@ impl UavAgent {
 
     /// The agent's half of a barrier round: one trial action per trial.
     pub fn act(&mut self, obs: &Observation, out: &mut Action) -> Result<(), FieldError> {
-        flockstep_proto::check_below(
-            "observation.n_trials",
-            obs.n_trials.into(),
-            self.trials.len() as u64 + 1,
-        )?;
         if obs.n_trials as usize != self.trials.len() {
             return Err(FieldError {
                 field: "observation.n_trials",

@@ -137,10 +137,9 @@ impl CommState {
 
     /// Takes in the flags each slot in `peers` sent in the previous tick, as the world
     /// relayed them in `views` (indexed by slot) for the trial's tick `tick`, with the
-    /// observation's `flags_changed`. Messages without `valid`, and from slots
-    /// this state has no entry for, say nothing. Returns whether the state changed. A
-    /// message out of range (a rogue or buggy sender) is refused with an error naming the
-    /// field; what the messages before it said is kept.
+    /// observation's `flags_changed`. Messages without `valid`, and from slots this state
+    /// has no entry for, say nothing. A message out of range (a rogue or buggy sender) is
+    /// refused with an error naming the field; what the messages before it said is kept.
     ///
     /// Taking a message in twice changes nothing, so after a tick whose messages were all
     /// taken in, only the peers whose flags changed since and the peers not heard then are
@@ -153,23 +152,25 @@ impl CommState {
         peers: u64,
         flags_changed: u64,
         views: &[AgentView],
-    ) -> Result<bool, FieldError> {
+    ) -> Result<(), FieldError> {
         let continues = self.heard_at.is_some_and(|at| at.checked_add(1) == Some(tick));
         let read = if continues { peers & (flags_changed | !self.heard_peers) } else { peers };
         let read = read & low_bits(views.len().min(self.route_lens.len()));
-        let changed = if read == 0 { false } else { self.take_in(read, views)? };
+        if read != 0 {
+            self.take_in(read, views)?;
+        }
         self.heard_at = Some(tick);
         self.heard_peers = peers;
-        Ok(changed)
+        Ok(())
     }
 
     /// Takes in the messages of the slots in `read`: most ticks have none, and they do not
     /// pay for this call.
     #[inline(never)]
-    fn take_in(&mut self, read: u64, views: &[AgentView]) -> Result<bool, FieldError> {
+    fn take_in(&mut self, read: u64, views: &[AgentView]) -> Result<(), FieldError> {
         self.heard_at = None;
         match self.mode {
-            CommMode::None => Ok(false),
+            CommMode::None => Ok(()),
             CommMode::Flags => self.hear_flags(read, views),
             CommMode::Compact => self.hear_compact(read, views),
         }
@@ -177,8 +178,7 @@ impl CommState {
 
     /// `flags`: raises each sender's entry for the waypoint it reported.
     #[inline]
-    fn hear_flags(&mut self, peers: u64, views: &[AgentView]) -> Result<bool, FieldError> {
-        let mut changed = false;
+    fn hear_flags(&mut self, peers: u64, views: &[AgentView]) -> Result<(), FieldError> {
         for peer in slots_in(peers) {
             let flags = &views[peer].flags;
             let Some(offset) = self.offsets[peer] else { continue };
@@ -195,16 +195,15 @@ impl CommState {
             let bit = offset + 2 * flags.waypoint as usize;
             if value > self.get(bit) {
                 self.set(bit, value);
-                changed = true;
             }
         }
-        Ok(changed)
+        Ok(())
     }
 
     /// `compact`: adds what each sender reported to what it had, and rewrites the words
     /// once if the fused findings grew.
     #[inline]
-    fn hear_compact(&mut self, peers: u64, views: &[AgentView]) -> Result<bool, FieldError> {
+    fn hear_compact(&mut self, peers: u64, views: &[AgentView]) -> Result<(), FieldError> {
         let (mut ruled, mut confirmed) = (0, 0);
         let mut refused = None;
         for peer in slots_in(peers) {
@@ -223,11 +222,11 @@ impl CommState {
             confirmed |= flags.confirmed;
         }
         let fused = (self.fused.0 | ruled, self.fused.1 | confirmed);
-        let changed = fused != self.fused && {
+        if fused != self.fused {
             self.fused = fused;
-            self.encode()
-        };
-        refused.map_or(Ok(changed), Err)
+            self.encode();
+        }
+        refused.map_or(Ok(()), Err)
     }
 
     /// The error for a `compact` message naming candidates the scenario does not have.
@@ -276,18 +275,14 @@ impl CommState {
     }
 
     /// `compact`: writes the words from the fused findings, two bits per candidate
-    /// (confirmed wins over ruled out); true if they changed.
-    fn encode(&mut self) -> bool {
+    /// (confirmed wins over ruled out).
+    fn encode(&mut self) {
         let (ruled, confirmed) = self.fused;
         let low = ruled & !confirmed;
-        let mut changed = false;
         for (w, word) in self.words.iter_mut().enumerate().take(2) {
             let half = |mask: u64| spread_bits((mask >> (32 * w)) as u32);
-            let encoded = (half(confirmed) * HIGH) | (half(low) * LOW);
-            changed |= *word != encoded;
-            *word = encoded;
+            *word = (half(confirmed) * HIGH) | (half(low) * LOW);
         }
-        changed
     }
 
     #[inline]
@@ -351,7 +346,8 @@ mod tests {
     use super::*;
 
     /// Hears `messages` (slot, flags) as the world relays them: in views indexed by slot,
-    /// every message marked as changed, at a tick after the last one heard.
+    /// every message marked as changed, at a tick after the last one heard. Returns whether
+    /// the state changed.
     fn hear(state: &mut CommState, messages: &[(usize, Flags)]) -> Result<bool, FieldError> {
         let mut views = vec![AgentView::default(); flockstep_proto::MAX_AGENTS];
         let mut peers = 0;
@@ -360,7 +356,20 @@ mod tests {
             peers |= 1 << slot;
         }
         let tick = state.heard_at.map_or(0, |at| at + 1);
-        state.hear(tick, peers, u64::MAX, &views)
+        hear_at(state, tick, peers, u64::MAX, &views)
+    }
+
+    /// [`CommState::hear`]; returns whether the state changed.
+    fn hear_at(
+        state: &mut CommState,
+        tick: u64,
+        peers: u64,
+        flags_changed: u64,
+        views: &[AgentView],
+    ) -> Result<bool, FieldError> {
+        let before = state.words().to_vec();
+        state.hear(tick, peers, flags_changed, views)?;
+        Ok(state.words() != before)
     }
 
     fn flags(state: &CommState, wp: u16, sees: bool) -> Flags {
@@ -513,26 +522,36 @@ mod tests {
         for (slot, flags) in [(1, at(0)), (2, at(1))] {
             views[slot].flags = flags;
         }
-        assert!(me.hear(7, 0b0110, 0, &views).unwrap(), "no tick heard before: all read");
+        assert!(hear_at(&mut me, 7, 0b0110, 0, &views).unwrap(), "no tick heard before: all read");
         views[1].flags = bad;
         views[3].flags = at(2);
-        assert!(me.hear(8, 0b1110, 0b0100, &views).unwrap(), "slot 3 is new to this state");
+        assert!(
+            hear_at(&mut me, 8, 0b1110, 0b0100, &views).unwrap(),
+            "slot 3 is new to this state"
+        );
         assert_eq!(me.entry(3, 2), Some(false));
-        assert!(me.hear(10, 0b1110, 0, &views).is_err(), "after a gap every peer is read");
+        assert!(hear_at(&mut me, 10, 0b1110, 0, &views).is_err(), "after a gap every peer is read");
         views[1].flags = at(3);
-        assert!(me.hear(11, 0b1110, 0, &views).unwrap(), "after an error every peer is read");
+        assert!(
+            hear_at(&mut me, 11, 0b1110, 0, &views).unwrap(),
+            "after an error every peer is read"
+        );
         assert_eq!(me.entry(1, 3), Some(false));
         views[1].flags = bad;
-        assert_eq!(me.hear(12, 0b1110, 0b0010, &views).unwrap_err().value, 99, "slot 1 changed");
+        assert_eq!(
+            hear_at(&mut me, 12, 0b1110, 0b0010, &views).unwrap_err().value,
+            99,
+            "slot 1 changed"
+        );
         views[1].flags = at(3);
-        assert!(!me.hear(13, 0b1110, 0, &views).unwrap());
+        assert!(!hear_at(&mut me, 13, 0b1110, 0, &views).unwrap());
         views[3].flags = bad;
         me.forget(3);
-        assert!(me.hear(14, 0b1110, 0, &views).is_err(), "a forgotten peer is read again");
+        assert!(hear_at(&mut me, 14, 0b1110, 0, &views).is_err(), "a forgotten peer is read again");
         views[3].flags = at(4);
-        assert!(me.hear(15, 0b1110, 0, &views).unwrap());
+        assert!(hear_at(&mut me, 15, 0b1110, 0, &views).unwrap());
         me.reset();
-        assert!(me.hear(16, 0b1110, 0, &views).unwrap(), "a reset state reads every peer");
+        assert!(hear_at(&mut me, 16, 0b1110, 0, &views).unwrap(), "a reset state reads every peer");
         assert_eq!((me.entry(1, 3), me.entry(3, 4)), (Some(false), Some(false)));
     }
 

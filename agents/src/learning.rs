@@ -123,11 +123,6 @@ impl QTable {
         self.step(s, a, STEP_REWARD, params.alpha);
     }
 
-    /// The row of state `s` (zeros if never written).
-    pub fn row(&self, state: StateId) -> Vec<f64> {
-        (0..self.n_actions).map(|a| self.get(state, a)).collect()
-    }
-
     /// Whether a table read from outside (a snapshot) is one this learner could have made:
     /// whole rows of finite values. The message names the first offending value.
     pub fn check(&self) -> Result<(), String> {

@@ -19,9 +19,11 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
     exit_with_parent, termination_requested, AgentPorts, ObservationSample, RunConfig, RunServices,
-    SignalMode, TransportError,
+    SignalMode,
 };
-use flockstep_proto::{JoinRequest, ObservationKind, RunInfo, ANY_SLOT};
+use flockstep_proto::{
+    FieldError, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
+};
 use flockstep_world::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -76,7 +78,7 @@ pub struct NodeArgs {
     pub trials: usize,
     #[arg(long)]
     pub seed: u64,
-    /// none or flags.
+    /// none, flags or compact.
     #[arg(long)]
     pub comm: String,
     /// Results directory: snapshots go to `<out>/qtables/`.
@@ -95,7 +97,8 @@ pub struct AttachArgs {
     /// Results directory for this agent's snapshots [default: results/RUN_ID].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Ask for this slot (1-based) if its route is free [default: any free route].
+    /// Ask for this slot (1-based); the agent exits if the run has no such route or another
+    /// agent holds it [default: any free route].
     #[arg(long)]
     pub uav: Option<usize>,
     #[command(flatten)]
@@ -146,7 +149,7 @@ pub fn run(args: &NodeArgs) -> Result<()> {
     if let Some(parent) = args.parent_pid {
         exit_with_parent(parent)?;
     }
-    let slot = args.uav.checked_sub(1).context("--uav counts from 1")?;
+    let slot = slot_of(args.uav)?;
     let setup = Setup {
         scenario: args.scenario.clone(),
         trials: args.trials,
@@ -154,15 +157,73 @@ pub fn run(args: &NodeArgs) -> Result<()> {
         comm: args.comm.clone(),
         params: None,
     };
-    serve(&run, Some(slot), Some(setup), &args.learner, &args.out)
+    serve(&run, Ask::Own(slot), Some(setup), &args.learner, &args.out)
 }
 
-/// `agent --attach RUN_ID`: joins a running simulation on a free route.
+/// `agent --attach RUN_ID`: joins a running simulation on a free route, or the one its
+/// `--uav` names.
 pub fn attach(run_id: &str, args: &AttachArgs) -> Result<()> {
     let run = RunConfig::new(run_id, SignalMode::Supervised);
-    let slot = args.uav.map(|u| u.checked_sub(1).context("--uav counts from 1")).transpose()?;
+    let ask = args.uav.map_or(Ok(Ask::Any), |uav| slot_of(uav).map(Ask::Route))?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(run_id));
-    serve(&run, slot, None, &args.learner, &out)
+    serve(&run, ask, None, &args.learner, &out)
+}
+
+/// The slot (0-based) of `--uav N`.
+fn slot_of(uav: usize) -> Result<usize> {
+    let slot = uav.checked_sub(1).context("--uav counts from 1")?;
+    if slot >= MAX_AGENTS {
+        bail!("--uav {uav}: a run has at most {MAX_AGENTS} routes");
+    }
+    Ok(slot)
+}
+
+/// The slot an agent asks the world for, and what it does when the world refuses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ask {
+    /// `agent run --uav N`: the supervisor's agent of slot N-1, which must fly that route
+    /// (a restarted one loads its snapshots). Refused because the route is taken, it asks
+    /// again: a restarted agent asks while the world has not yet dropped its dead
+    /// predecessor, and gets the slot once it has.
+    Own(usize),
+    /// `agent --attach --uav N`: slot N-1 if its route is free; a refusal ends the agent.
+    Route(usize),
+    /// `agent --attach`: any free route; a refusal ends the agent.
+    Any,
+}
+
+impl Ask {
+    /// `JoinRequest::slot`.
+    fn slot(self) -> u32 {
+        match self {
+            // Below `MAX_AGENTS` (`slot_of`), so never `ANY_SLOT`.
+            Ask::Own(slot) | Ask::Route(slot) => slot as u32,
+            Ask::Any => ANY_SLOT,
+        }
+    }
+
+    /// What the agent makes of the world's refusal `code` ([`Refusal`] as `u8`) in a round
+    /// of a run with `routes` routes: None to ask again, else the error it exits with.
+    fn refused(self, code: u8, routes: u32, run: &str) -> Option<anyhow::Error> {
+        let Some(why) = Refusal::from_u8(code) else {
+            let field = "observation.refusal";
+            return Some(FieldError { field, value: code.into(), expected: "1..=3".into() }.into());
+        };
+        let error = match (self, why) {
+            (Ask::Own(_), Refusal::RouteTaken) => return None,
+            (Ask::Own(slot) | Ask::Route(slot), Refusal::NoSuchRoute) => {
+                let plural = if routes == 1 { "" } else { "s" };
+                anyhow::anyhow!("--uav {}: run `{run}` has {routes} route{plural}", slot + 1)
+            }
+            (Ask::Route(slot), Refusal::RouteTaken) => anyhow::anyhow!(
+                "--uav {}: route {} of run `{run}` is taken by another agent",
+                slot + 1,
+                slot + 1
+            ),
+            (_, why) => anyhow::anyhow!("run `{run}`: the world refused this agent: {why}"),
+        };
+        Some(error)
+    }
 }
 
 /// What the agent must agree on with the run: given on the command line, or read from the
@@ -180,7 +241,7 @@ struct Setup {
 /// Serves one run: `setup` None means "read it from the run's description" (attaching).
 fn serve(
     run: &RunConfig,
-    wanted: Option<usize>,
+    ask: Ask,
     setup: Option<Setup>,
     learner: &LearnerArgs,
     out: &Path,
@@ -206,9 +267,8 @@ fn serve(
             )?;
         }
     }
-    let request = JoinRequest::new(join_nonce(), wanted.map_or(ANY_SLOT, |s| s as u32));
-    let (slot, first) = await_admission(&ports, &request, world_timeout)?;
-    let nonce = request.nonce;
+    let nonce = join_nonce();
+    let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
     let setup = match setup {
         Some(setup) => setup,
         None => read_run_info(&ports, world_timeout)?,
@@ -275,36 +335,37 @@ fn join_nonce() -> u64 {
 /// How often an agent not yet admitted repeats its join request.
 const REJOIN_PAUSE: Duration = Duration::from_millis(50);
 
-/// Asks the world for a slot and waits for its answer; returns the slot and the observation
-/// that admitted the agent, which is the first round it must answer. The request is
-/// repeated until it is answered: one sent while the world is still setting up its ports is
-/// lost, and an agent asking for its own slot (a restart) must ask again once the world has
-/// dropped its dead predecessor. An agent asking for any free route is refused if there is
-/// none.
+/// Asks the world for a slot (request `nonce`) and waits for its answer; returns the slot
+/// and the observation that admitted the agent, which is the first round it must answer.
+/// The request is repeated until it is answered: one sent while the world is still setting
+/// up its ports is lost, and a restarted agent asking for its own slot is refused until the
+/// world has dropped its dead predecessor. Any other refusal ends the wait with an error
+/// that says why ([`Ask::refused`]).
 fn await_admission(
     ports: &AgentPorts,
-    request: &JoinRequest,
+    ask: Ask,
+    nonce: u64,
     timeout: Duration,
 ) -> Result<(usize, ObservationSample)> {
+    let request = JoinRequest::new(nonce, ask.slot());
     let mut asked: Option<Instant> = None;
-    ports
-        .waiter()
-        .wait(&"admission by the world", timeout, || {
-            if asked.is_none_or(|at| at.elapsed() >= REJOIN_PAUSE) {
-                ports.send_join(request)?;
-                asked = Some(Instant::now());
+    ports.waiter().wait(&"admission by the world", timeout, || {
+        if asked.is_none_or(|at| at.elapsed() >= REJOIN_PAUSE) {
+            ports.send_join(&request)?;
+            asked = Some(Instant::now());
+        }
+        while let Some(sample) = ports.try_observation()? {
+            if let Some(slot) = sample.slot_owners().iter().position(|&n| n == nonce) {
+                return Ok(Some(Ok((slot, sample))));
             }
-            while let Some(sample) = ports.try_observation()? {
-                if sample.refused_nonce == request.nonce && request.slot == ANY_SLOT {
-                    return Err(TransportError::Refused { run: ports.run_id().to_string() });
-                }
-                if let Some(slot) = sample.slot_owners().iter().position(|&n| n == request.nonce) {
-                    return Ok(Some((slot, sample)));
+            if sample.refused_nonce == nonce {
+                if let Some(error) = ask.refused(sample.refusal, sample.n_slots, ports.run_id()) {
+                    return Ok(Some(Err(error)));
                 }
             }
-            Ok(None)
-        })
-        .map_err(Into::into)
+        }
+        Ok(None)
+    })?
 }
 
 /// Reads the run's description (for an attaching agent).
@@ -426,5 +487,45 @@ mod tests {
         assert!(no_round.contains("`soon` is not a round number"), "{no_round}");
         let no_path = parse_faults("join-after-file=").unwrap_err().to_string();
         assert!(no_path.contains("--fault `join-after-file=`: expected"), "{no_path}");
+    }
+
+    /// The message an agent exits with when the world refuses it, or None if it asks again.
+    fn refused(ask: Ask, why: Refusal, routes: u32) -> Option<String> {
+        ask.refused(why as u8, routes, "r1").map(|e| e.to_string())
+    }
+
+    #[test]
+    fn a_refused_agent_says_why_and_only_a_supervised_one_asks_again_for_a_taken_route() {
+        assert_eq!(
+            refused(Ask::Route(8), Refusal::NoSuchRoute, 3).as_deref(),
+            Some("--uav 9: run `r1` has 3 routes")
+        );
+        assert_eq!(
+            refused(Ask::Route(1), Refusal::RouteTaken, 3).as_deref(),
+            Some("--uav 2: route 2 of run `r1` is taken by another agent")
+        );
+        assert_eq!(
+            refused(Ask::Any, Refusal::RunFull, 2).as_deref(),
+            Some("run `r1`: the world refused this agent: every route of the scenario is taken")
+        );
+        // A restarted agent's dead predecessor may still hold its route: it asks again.
+        assert_eq!(refused(Ask::Own(1), Refusal::RouteTaken, 2), None);
+        assert_eq!(
+            refused(Ask::Own(2), Refusal::NoSuchRoute, 1).as_deref(),
+            Some("--uav 3: run `r1` has 1 route")
+        );
+        let unknown = Ask::Any.refused(9, 2, "r1").expect("an error").to_string();
+        assert!(unknown.contains("observation.refusal") && unknown.contains("= 9"), "{unknown}");
+    }
+
+    #[test]
+    fn uav_counts_from_1_up_to_the_largest_run() {
+        assert_eq!(slot_of(1).unwrap(), 0);
+        assert_eq!(slot_of(0).unwrap_err().to_string(), "--uav counts from 1");
+        assert_eq!(
+            slot_of(MAX_AGENTS + 1).unwrap_err().to_string(),
+            format!("--uav {}: a run has at most {MAX_AGENTS} routes", MAX_AGENTS + 1)
+        );
+        assert_ne!(Ask::Route(MAX_AGENTS - 1).slot(), ANY_SLOT);
     }
 }

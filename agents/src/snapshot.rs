@@ -41,6 +41,8 @@ pub enum SnapshotError {
     Format { found: u32 },
     #[error("snapshot was learned with {what} `{found}`, this agent uses `{expected}`")]
     Mismatch { what: &'static str, found: String, expected: String },
+    #[error("snapshot holds trial {found}, read here for trial {expected} (a renamed file?)")]
+    Trial { found: u32, expected: usize },
     #[error("inconsistent snapshot: {0}")]
     Inconsistent(String),
     /// The error of one file. Its cause is in the message, not also a `source`: error
@@ -62,10 +64,14 @@ impl Snapshot {
         Ok(snapshot)
     }
 
-    /// Loads this snapshot into `agent` after checking it was learned on the same setup.
+    /// Loads this snapshot into `agent`, trial `trial` of its run, after checking it was
+    /// learned on the same setup and in that trial. The agent goes on counting its training
+    /// episodes from the snapshot's, so the snapshots it writes next say how much training
+    /// is behind them, a restart or a resume included.
     pub fn restore(
         &self,
         agent: &mut TrialAgent,
+        trial: usize,
         scenario: &str,
         comm: CommMode,
         tree: &str,
@@ -85,6 +91,9 @@ impl Snapshot {
         check("communication mode", self.comm.name(), comm.name())?;
         check("agent slot", &self.slot.to_string(), &agent.slot().to_string())?;
         check("tree", &self.tree, tree)?;
+        if self.trial as usize != trial {
+            return Err(SnapshotError::Trial { found: self.trial, expected: trial });
+        }
         for (i, table) in self.tables.iter().enumerate() {
             table.check().map_err(|e| {
                 SnapshotError::Inconsistent(format!("learning selector {}: {e}", i + 1))
@@ -101,6 +110,7 @@ impl Snapshot {
             .map_err(SnapshotError::Inconsistent)?;
         agent.tree_mut().set_tables(self.tables.clone()).map_err(SnapshotError::Inconsistent)?;
         agent.set_states(states);
+        agent.set_trained_episodes(self.episodes);
         Ok(())
     }
 }
@@ -252,7 +262,7 @@ pub fn restore_snapshots(
         let path = snapshot_path(dir, slot, trial);
         match read_snapshot(&path)? {
             Some(snapshot) => {
-                snapshot.restore(part, scenario, comm, tree).map_err(in_file(&path))?
+                snapshot.restore(part, trial, scenario, comm, tree).map_err(in_file(&path))?
             }
             None => missing.push(trial),
         }
@@ -383,13 +393,50 @@ mod tests {
         table.step(0, 3, f64::NAN, 1.0);
         snapshot.tables = vec![table];
         let err = snapshot
-            .restore(&mut agent.trials_mut()[0], "s3", CommMode::Flags, "tree")
+            .restore(&mut agent.trials_mut()[0], 0, "s3", CommMode::Flags, "tree")
             .unwrap_err()
             .to_string();
         assert_eq!(
             err,
             "inconsistent snapshot: learning selector 1: Q(state 0, child 4) is NaN; \
              Q-values are finite"
+        );
+    }
+
+    /// A restored agent counts its training on from the snapshot: the next snapshot it
+    /// writes says how many episodes are behind it in all, not since the restart.
+    #[test]
+    fn a_restored_agent_goes_on_counting_its_training_episodes() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut agent = uav1();
+        learn_one_state(&mut agent);
+        agent.trials_mut()[0].set_trained_episodes(10_000);
+        write(&agent, dir.path());
+        let mut restarted = uav1();
+        let missing =
+            restore_snapshots(&mut restarted, dir.path(), "s3", CommMode::Flags, "tree").unwrap();
+        assert!(missing.is_empty());
+        assert_eq!(restarted.trials()[0].trained_episodes(), 10_000);
+        let path = write(&restarted, dir.path());
+        assert_eq!(read_snapshot(&path).unwrap().expect("written").episodes, 10_000);
+    }
+
+    /// A snapshot of another trial (a file renamed or copied by hand) is refused with the
+    /// file named, not loaded into the wrong trial.
+    #[test]
+    fn a_snapshot_of_another_trial_is_refused_naming_its_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let agent = uav1();
+        write_snapshot(&agent.trials()[0], dir.path(), 3, "s3", CommMode::Flags, "tree").unwrap();
+        std::fs::rename(snapshot_path(dir.path(), 0, 3), snapshot_path(dir.path(), 0, 0)).unwrap();
+        let err = restore_snapshots(&mut uav1(), dir.path(), "s3", CommMode::Flags, "tree")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.ends_with(
+                "uav1_trial0.bin: snapshot holds trial 3, read here for trial 0 (a renamed file?)"
+            ),
+            "{err}"
         );
     }
 

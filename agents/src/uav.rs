@@ -65,7 +65,8 @@ pub struct Body<'a> {
 }
 
 impl Body<'_> {
-    /// Ticks action `leaf`. Returns the status and whether the pose changed.
+    /// Ticks action `leaf` and returns its status; the command it issues is in `pose` and
+    /// `action`.
     #[inline]
     pub fn tick_action(&mut self, leaf: LeafId, progress: &mut u32) -> Status {
         match leaf {

@@ -149,11 +149,11 @@ fn a_failing_child_is_updated_with_s_prime_equal_s_before_the_next_child() {
     let qa = 4.0 + 0.5 * (-1.0 + 0.5 * 4.0 - 4.0); // max Q(0, .) = Q(0,a) = 4
     let qb = 2.0 + 0.5 * (-1.0 + 0.5 * qa - 2.0); // max Q(0, .) = Q(0,a) updated = 2.5
                                                   // Had a's update waited until after b was tried, b's target would use max = 4: 1.5.
-    let row = h.table(0).row(0);
+    let row = h.row(0, 0);
     assert_close(row[0], qa);
     assert_close(row[1], qb);
     assert_eq!(row[2], 0.0, "c's step waits for the next tick");
-    assert_eq!(h.table(0).row(9), [100.0, 100.0, 101.0]);
+    assert_eq!(h.row(0, 9), [100.0, 100.0, 101.0]);
     // Next tick, in state 9: c's step completes with s' = 9.
     h.expect(S, &["c=S"]);
     assert_eq!(h.ctx.observations, 2);
@@ -173,13 +173,13 @@ fn a_running_child_gets_one_update_per_tick_with_the_next_state() {
     h.expect(R, &["a=R"]);
     let q0a = 0.0 + 0.5 * (-1.0 + 0.5 * 4.0 - 0.0);
     assert_close(h.table(0).get(0, 0), q0a);
-    assert_eq!(h.table(0).row(1), [4.0, -10.0]);
+    assert_eq!(h.row(0, 1), [4.0, -10.0]);
     h.ctx.state = 2;
     h.expect(R, &["a=R"]);
     assert_close(h.table(0).get(0, 0), q0a);
     let q1a = 4.0 + 0.5 * (-1.0 + 0.5 * 6.0 - 4.0);
     assert_close(h.table(0).get(1, 0), q1a);
-    assert_eq!(h.table(0).row(2), [6.0, -10.0]);
+    assert_eq!(h.row(0, 2), [6.0, -10.0]);
     assert_eq!(h.get("a").progress_seen, [0, 1, 2], "chosen again: not halted");
     assert_eq!(h.halts("a"), 0);
 }
@@ -266,7 +266,7 @@ fn a_terminal_episode_end_updates_without_bootstrap() {
     let terminal = 2.0 + 0.5 * (-1.0 - 2.0);
     assert_close(h.table(0).get(0, 0), terminal);
     // (A bootstrap from state 1 would have given 2 + 0.5 * (-1 + 0.5 * 8 - 2) = 2.5.)
-    assert_eq!(h.table(0).row(1), [8.0, 8.0]);
+    assert_eq!(h.row(0, 1), [8.0, 8.0]);
     // The step is consumed: neither another end nor the next tick updates it again.
     h.tree.end_episode_truncated(1);
     assert_close(h.table(0).get(0, 0), terminal);
@@ -298,7 +298,7 @@ fn duplicate_children_are_distinct_actions() {
         let mut expected = row;
         expected[chosen as usize] =
             row[chosen as usize] + 0.5 * (-1.0 + 0.5 * 0.0 - row[chosen as usize]);
-        let got = h.table(0).row(0);
+        let got = h.row(0, 0);
         for child in 0..3 {
             assert_close(got[child], expected[child]);
         }
@@ -363,17 +363,17 @@ fn fig5_terminal_credit_goes_to_the_choice_that_revealed_the_target() {
     let second = h.chosen()[0] as usize;
     // All Q were 0: the first step's target is -1 + 1.0 * max Q(1, .) = -1.
     assert_close(h.table(0).get(0, first), 0.0 + 0.1 * (-1.0 + 1.0 * 0.0 - 0.0));
-    assert_eq!(h.table(0).row(1), [0.0; 5]);
+    assert_eq!(h.row(0, 1), [0.0; 5]);
     // The target comes into view: the AND branch ends the episode, the LOR is not ticked.
     h.set("seeTarget", true);
     h.ctx.state = 2;
     h.expect(S, &["seeTarget=S", "endEpisode=S"]);
-    assert_eq!(h.table(0).row(1), [0.0; 5]);
+    assert_eq!(h.row(0, 1), [0.0; 5]);
     h.tree.end_episode_terminal();
     let mut expected = [0.0; 5];
     expected[second] = 0.0 + 0.1 * (-1.0 - 0.0);
-    assert_eq!(h.table(0).row(1), expected);
-    let updated = h.table(0).row(0).iter().filter(|&&q| q != 0.0).count();
+    assert_eq!(h.row(0, 1), expected);
+    let updated = h.row(0, 0).iter().filter(|&&q| q != 0.0).count();
     assert_eq!(updated, 1, "state 0 has only the first step's update");
 }
 

@@ -161,8 +161,9 @@ impl Action {
     }
 }
 
-/// Asks the world for a place in the barrier: sent once by every agent when it starts (the
-/// supervisor's agents ask for their own slot, an attaching agent for any free route).
+/// Asks the world for a place in the barrier: sent by every agent when it starts, and
+/// repeated until the world answers (the supervisor's agents ask for their own slot, an
+/// attaching agent for any free route or the one its `--uav` names).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("flockstep::JoinRequest")]

@@ -28,7 +28,7 @@ pub use flags::Flags;
 pub use limits::{low_bits, slots_in, MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
 pub use pose::{Command, Heading, Height, Pose};
 pub use world_to_agent::{
-    AgentView, Observation, ObservationKind, Phase, RunInfo, TrialHeader, TrialObservation,
+    AgentView, Observation, ObservationKind, Phase, Refusal, RunInfo, TrialHeader, TrialObservation,
 };
 pub use world_to_supervisor::{EpisodeBatch, EpisodeReport, EPISODE_BATCH};
 

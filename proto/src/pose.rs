@@ -58,10 +58,6 @@ impl Heading {
         Heading::ALL.get(v as usize).copied()
     }
 
-    pub fn clockwise(self) -> Heading {
-        Heading::ALL[(self as usize + 1) % 4]
-    }
-
     /// Unit step (d_row, d_col) of "forward"; row 0 is the north edge.
     pub fn forward(self) -> (i32, i32) {
         match self {

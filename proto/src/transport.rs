@@ -76,10 +76,6 @@ pub enum TransportError {
     Terminated { run: String, what: String },
     #[error("run `{run}`: peers did not connect within {waited:?}: {missing}")]
     PeersMissing { run: String, missing: String, waited: Duration },
-    #[error(
-        "run `{run}`: the world refused to admit this agent: every route of the scenario is taken"
-    )]
-    Refused { run: String },
     #[error("parent process {parent} is gone (this process now belongs to {now})")]
     ParentGone { parent: u32, now: libc::pid_t },
     #[error("{what} failed: {source}")]

@@ -106,6 +106,40 @@ pub enum ObservationKind {
     Stop = 1,
 }
 
+/// Why the world refused a join request: the agent that sent it learns the reason from
+/// [`Observation::refusal`], so it can say what is wrong instead of asking until it times out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Refusal {
+    /// The request asked for any free route, and every route of the scenario is taken.
+    RunFull = 1,
+    /// The slot asked for is not a route of the scenario.
+    NoSuchRoute = 2,
+    /// The slot asked for is held by another agent.
+    RouteTaken = 3,
+}
+
+impl Refusal {
+    pub fn from_u8(v: u8) -> Option<Refusal> {
+        match v {
+            1 => Some(Refusal::RunFull),
+            2 => Some(Refusal::NoSuchRoute),
+            3 => Some(Refusal::RouteTaken),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Refusal::RunFull => "every route of the scenario is taken",
+            Refusal::NoSuchRoute => "the scenario has no such route",
+            Refusal::RouteTaken => "the route asked for is taken by another agent",
+        })
+    }
+}
+
 /// The broadcast of one barrier round.
 ///
 /// The message has room for every trial and agent slot, but a round fills only the ones in
@@ -122,11 +156,12 @@ pub struct Observation {
     pub live: u64,
     /// [`ObservationKind`] as `u8`.
     pub kind: u8,
-    pub _reserved: [u8; 3],
+    /// [`Refusal`] as `u8`: why the request of `refused_nonce` was refused (0: none was).
+    pub refusal: u8,
+    pub _reserved: [u8; 2],
     /// Number of valid entries of `trials`.
     pub n_trials: u32,
-    /// A join request refused in this round because no route was free (its `nonce`; 0:
-    /// none).
+    /// The `nonce` of a join request refused in this round (0: none); `refusal` says why.
     pub refused_nonce: u64,
     /// Agent slots of the run (one per route): valid entries of `owners`, and views per trial.
     pub n_slots: u32,
@@ -145,7 +180,8 @@ impl Default for Observation {
             round: 0,
             live: 0,
             kind: ObservationKind::Tick as u8,
-            _reserved: [0; 3],
+            refusal: 0,
+            _reserved: [0; 2],
             n_trials: 0,
             refused_nonce: 0,
             n_slots: 0,

@@ -45,3 +45,18 @@ fn replay_names_the_script_line_of_a_missing_result() {
         "{report}"
     );
 }
+
+/// A replay commands no UAV, so the run's limit of 16 commands per tick does not apply: a
+/// tree that ticks an action 20 times in one tick replays (a run refuses it). Before, the
+/// replay refused it with the run's limit.
+#[test]
+fn replay_takes_a_tree_past_the_run_limit_of_commands_per_tick() {
+    let dir = crate::harness::scratch();
+    let (tree, script) = (dir.path().join("busy.bt"), dir.path().join("busy.script"));
+    std::fs::write(&tree, "REPEAT 1 n=20\n- A-step 0\n").expect("write the tree");
+    std::fs::write(&script, "step=S\n").expect("write the script");
+    let report =
+        stdout(&["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")]);
+    let steps = vec!["A-step@2=SUCCESS"; 20].join(" ");
+    assert_eq!(report, format!("tick 1: SUCCESS  ticked {steps}  halted -\n"));
+}

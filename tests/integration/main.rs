@@ -1,6 +1,8 @@
 //! Integration tests: the real binaries, spawned as a user would run them.
 //! Every test uses its own results directory and run id, so they run in parallel.
 
+/// `agent --attach` refused by the world: the reason, at once.
+mod attach;
 /// `agent bt show` and `agent bt replay`.
 mod bt_tools;
 /// Bad flags and files: one clear line, a non-zero exit, nothing left behind.

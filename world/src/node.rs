@@ -16,7 +16,9 @@ use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
 };
-use flockstep_proto::{slots_in, JoinRequest, ObservationKind, RunInfo, ANY_SLOT, MAX_AGENTS};
+use flockstep_proto::{
+    slots_in, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
+};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -133,8 +135,9 @@ struct Members {
     nodes: [Option<SenderNode>; MAX_AGENTS],
     /// Join requests read and not yet answered: the next round answers them.
     waiting: Vec<(JoinRequest, SenderNode)>,
-    /// A join request refused in the round being prepared (0: none).
-    refused: u64,
+    /// A join request refused in the round being prepared, and why: the round tells its
+    /// sender (one a round; another refused request is answered when it is repeated).
+    refused: Option<(u64, Refusal)>,
 }
 
 impl Members {
@@ -168,7 +171,7 @@ impl Default for Members {
             owners: [0; MAX_AGENTS],
             nodes: [None; MAX_AGENTS],
             waiting: Vec::new(),
-            refused: 0,
+            refused: None,
         }
     }
 }
@@ -251,9 +254,9 @@ impl WorldNode {
         Ok(stop)
     }
 
-    /// Answers the join requests read so far: a free route (the one asked for if free) from
-    /// the next round on, or a refusal. The trials let the agent in at their next episode
-    /// start.
+    /// Answers the join requests read so far: the route asked for, or with [`ANY_SLOT`] the
+    /// first free one, from the next round on; or a refusal that says why (no such route,
+    /// route taken, none free). The trials let the agent in at their next episode start.
     fn admit_joiners(&mut self) -> Result<()> {
         for (request, node) in std::mem::take(&mut self.members.waiting) {
             if self.members.is_repeat(&request) {
@@ -265,7 +268,7 @@ impl WorldNode {
             }
             let wanted = (request.slot != ANY_SLOT).then_some(request.slot as usize);
             match self.world.free_slot(wanted) {
-                Some(slot) => {
+                Ok(slot) => {
                     self.world.admit(slot);
                     self.members.seat(slot, &request, node);
                     tracing::info!(
@@ -274,13 +277,9 @@ impl WorldNode {
                         "agent admitted; it joins each trial at its next episode"
                     );
                 }
-                None => {
-                    self.members.refused = request.nonce;
-                    tracing::warn!(
-                        pid = ?node.pid(),
-                        slot = request.slot,
-                        "join refused: no such free route"
-                    );
+                Err(why) => {
+                    self.members.refused = Some((request.nonce, why));
+                    tracing::warn!(pid = ?node.pid(), slot = request.slot, "join refused: {why}");
                 }
             }
             // An attaching agent subscribed to the run's description after it was published.
@@ -338,7 +337,9 @@ impl WorldNode {
                 world.observe(observation);
                 let slots = observation.n_slots as usize;
                 observation.owners[..slots].copy_from_slice(&members.owners[..slots]);
-                observation.refused_nonce = std::mem::take(&mut members.refused);
+                let (nonce, why) = members.refused.take().map_or((0, 0), |(n, why)| (n, why as u8));
+                observation.refused_nonce = nonce;
+                observation.refusal = why;
                 if stop_requested {
                     observation.kind = ObservationKind::Stop as u8;
                 }

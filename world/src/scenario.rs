@@ -23,6 +23,11 @@ const BUILTIN: [(&str, &str, &str); 4] = [
     ("s4", "s4_three_uavs_two_targets.map", include_str!("../maps/s4_three_uavs_two_targets.map")),
 ];
 
+/// The file name and text of built-in scenario `name`.
+fn builtin_map(name: &str) -> Option<(&'static str, &'static str)> {
+    BUILTIN.iter().find(|b| b.0 == name).map(|&(_, file, text)| (file, text))
+}
+
 /// Index of `pose` within its UAV's slice of the table: 2 heights x 4 headings a waypoint.
 #[inline]
 pub(crate) fn state_index(pose: Pose) -> usize {
@@ -60,24 +65,18 @@ impl Scenario {
         Scenario::build(source, map, text.to_string())
     }
 
-    /// Builds and verifies a map made in memory (e.g. by a generator). Its text is
-    /// [`MapFile::to_text`], and errors point at lines of that text.
-    pub fn from_map(source: &str, map: &MapFile) -> Result<Scenario, WorldError> {
-        Scenario::from_text(source, &map.to_text())
-    }
-
-    /// One of the thesis's scenarios: `s1`, `s2` or `s3`.
+    /// A built-in scenario: the thesis's `s1`, `s2`, `s3`, or `s4` (s3 with a free third route).
     pub fn builtin(name: &str) -> Option<Scenario> {
-        let (_, file, text) = BUILTIN.iter().find(|b| b.0 == name)?;
+        let (file, text) = builtin_map(name)?;
         // The embedded maps are verified by the tests, so this never discards an error.
         Scenario::from_text(file, text).ok()
     }
 
-    /// `s1`, `s2`, `s3`, a generated scenario `gen:key=value,...` (see
+    /// A built-in scenario (`s1` to `s4`), a generated scenario `gen:key=value,...` (see
     /// [`crate::generate`]), or else the path of a `.map` file (write `./gen:...` for a
     /// file whose name starts with `gen:`).
     pub fn resolve(spec: &str) -> Result<Scenario, WorldError> {
-        if let Some((_, file, text)) = BUILTIN.iter().find(|b| b.0 == spec) {
+        if let Some((file, text)) = builtin_map(spec) {
             return Scenario::from_text(file, text);
         }
         if crate::generate::GenSpec::is_gen(spec) {
@@ -191,15 +190,7 @@ impl Scenario {
         target_label(target)
     }
 
-    /// The (row, col) of target `target`.
-    ///
-    /// # Panics
-    /// If `target >= n_targets()`.
-    pub fn target_cell(&self, target: usize) -> (usize, usize) {
-        self.map.targets[target]
-    }
-
-    /// Every UAV's pose at the start of an episode (0-based waypoint).
+    /// Every UAV's pose at the start of an episode, on its own route (0-based waypoint).
     pub fn start_pose(&self) -> Pose {
         self.map.start
     }

@@ -5,8 +5,9 @@
 //! every trial by one tick and reports finished episodes. The in-process runner and the
 //! `world` process call exactly these, so both transports compute the same thing.
 //!
-//! Episode rules (SPEC 2): every UAV starts at its route's waypoint 1 with the map's start
-//! height and heading; the target is drawn uniformly among the candidate cells; a UAV's
+//! Episode rules (SPEC 2): every UAV starts at the map's `start:` pose, on its own route
+//! (waypoint 1 in every built-in map, as SPEC 2 has it; a map may name another waypoint,
+//! which every route must have); the target is drawn uniformly among the candidate cells; a UAV's
 //! episode ends in the tick its `A-endEpisode` runs, its length counting that tick; a UAV
 //! that finished hovers until every member finished or the tick cap is reached; then
 //! everyone is reset and a new target drawn. After the training budget each trial runs its
@@ -15,7 +16,7 @@
 use crate::scenario::{state_index, state_pose, Scenario};
 use flockstep_proto::{
     low_bits, seed, slots_in, Action, AgentView, EpisodeReport, FieldError, Heading, Height,
-    Observation, ObservationKind, Phase, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
+    Observation, ObservationKind, Phase, Refusal, TrialAction, TrialHeader, MAX_AGENTS, MAX_TRIALS,
 };
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -441,24 +442,22 @@ impl World {
         self.round += 1;
     }
 
-    pub fn all_done(&self) -> bool {
-        self.trials.iter().all(TrialWorld::is_done)
-    }
-
     /// Agent slots in the barrier.
     pub fn live(&self) -> u64 {
         self.live
     }
 
-    /// The slot an agent asking for `wanted` gets: that slot if its route is free (an agent
-    /// asking for its own slot must fly that route: its snapshots are for it); with None,
-    /// the first free route. None if there is no such route.
-    pub fn free_slot(&self, wanted: Option<usize>) -> Option<usize> {
+    /// The slot an agent asking for `wanted` gets: that slot if its route is free, never
+    /// another (an agent asking for a slot must fly that route: a restarted one's snapshots
+    /// are for it); with None, the first free route. The error says why there is none.
+    pub fn free_slot(&self, wanted: Option<usize>) -> Result<usize, Refusal> {
         let routes = self.slots();
-        let free = |slot: &usize| *slot < routes && self.live & (1 << slot) == 0;
+        let free = |slot: usize| self.live & (1 << slot) == 0;
         match wanted {
-            Some(slot) => Some(slot).filter(free),
-            None => (0..routes).find(free),
+            Some(slot) if slot >= routes => Err(Refusal::NoSuchRoute),
+            Some(slot) if !free(slot) => Err(Refusal::RouteTaken),
+            Some(slot) => Ok(slot),
+            None => (0..routes).find(|&slot| free(slot)).ok_or(Refusal::RunFull),
         }
     }
 
@@ -588,6 +587,21 @@ mod tests {
             assert_eq!((err.field, err.value, err.expected.as_str()), (field, value, expected));
             assert_eq!(observation(&world), before, "a bad action changes nothing");
         }
+    }
+
+    /// An agent asking for a slot gets that one or a refusal saying why, never another
+    /// route; one asking for any gets the first free route.
+    #[test]
+    fn a_slot_asked_for_is_given_or_refused_with_the_reason() {
+        let mut world = s3_world();
+        assert_eq!(world.free_slot(Some(1)), Err(Refusal::RouteTaken));
+        assert_eq!(world.free_slot(Some(2)), Err(Refusal::NoSuchRoute));
+        assert_eq!(world.free_slot(Some(usize::MAX)), Err(Refusal::NoSuchRoute));
+        assert_eq!(world.free_slot(None), Err(Refusal::RunFull));
+        world.remove(0);
+        assert_eq!(world.free_slot(Some(1)), Err(Refusal::RouteTaken), "not the free route 0");
+        assert_eq!(world.free_slot(Some(0)), Ok(0));
+        assert_eq!(world.free_slot(None), Ok(0));
     }
 
     #[test]

@@ -26,7 +26,7 @@
 //!
 //! [`parse_tree`]: super::parse::parse_tree
 
-use super::spec::{NodeKind, NodeSpec, TreeSpec};
+use super::spec::{NodeSpec, TreeSpec};
 
 /// The tree in the canonical text format.
 ///
@@ -43,8 +43,7 @@ fn write_text(node: &NodeSpec, depth: usize, out: &mut String) {
         out.push_str(&"-".repeat(depth));
         out.push(' ');
     }
-    let param = param_suffix(&node.kind);
-    out.push_str(&format!("{} {}{param}\n", node.kind, node.children.len()));
+    out.push_str(&format!("{} {}{}\n", node.kind, node.children.len(), node.kind.param_suffix()));
     for child in &node.children {
         write_text(child, depth + 1, out);
     }
@@ -60,8 +59,7 @@ pub fn render_ascii(tree: &TreeSpec) -> String {
 
 /// Draws `node` after `branch` (its own connector), its children after `indent`.
 fn write_ascii(node: &NodeSpec, width: usize, branch: &str, indent: &str, out: &mut String) {
-    let param = param_suffix(&node.kind);
-    out.push_str(&format!("{:>width$}  {branch}{}{param}\n", node.line, node.kind));
+    out.push_str(&format!("{:>width$}  {branch}{}\n", node.line, node.kind.label()));
     let last = node.children.len().saturating_sub(1);
     for (index, child) in node.children.iter().enumerate() {
         let (own, below) =
@@ -73,9 +71,4 @@ fn write_ascii(node: &NodeSpec, width: usize, branch: &str, indent: &str, out: &
 
 fn max_line(node: &NodeSpec) -> usize {
     node.children.iter().map(max_line).fold(node.line, usize::max)
-}
-
-/// ` key=value` for a kind with a parameter, else nothing.
-fn param_suffix(kind: &NodeKind) -> String {
-    kind.param().map(|(key, value)| format!(" {key}={value}")).unwrap_or_default()
 }

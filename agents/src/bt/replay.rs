@@ -15,6 +15,7 @@
 //! name stands for every leaf of that name. A leaf ticked without a result is an error that
 //! names the script line. Learning selectors order their children greedily by all-zero
 //! Q-values, so ties are broken by the seeded RNG (`--seed`) and the replay is repeatable.
+//! The leaves command no UAV, so a run's limit of commands per tick does not apply here.
 //!
 //! Output, one line per tick (`name@line` is the node's line in the tree file):
 //!
@@ -187,8 +188,8 @@ pub fn replay(
     seed: u64,
 ) -> Result<String, Box<dyn std::error::Error + Send + Sync>> {
     let ticks = parse_script(script_file, script)?;
-    let mut tree =
-        Tree::new(tree_spec, LearnParams::greedy(), Xoshiro256PlusPlus::seed_from_u64(seed))?;
+    let rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut tree = Tree::for_replay(tree_spec, LearnParams::greedy(), rng)?;
     let leaf_nodes: Vec<bool> = (0..tree.node_count() as NodeId).map(|n| tree.is_leaf(n)).collect();
     let name = |tree: &Tree, node: NodeId| {
         let (line, label) = tree.label(node);

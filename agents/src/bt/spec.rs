@@ -123,6 +123,17 @@ impl NodeKind {
             _ => None,
         }
     }
+
+    /// ` key=value` for a kind with a parameter, else nothing: what follows the child count
+    /// in the text format, and the kind in a label.
+    pub fn param_suffix(&self) -> String {
+        self.param().map(|(key, value)| format!(" {key}={value}")).unwrap_or_default()
+    }
+
+    /// The kind with its parameter, as drawings and traces name a node (`PAR m=2`).
+    pub fn label(&self) -> String {
+        format!("{self}{}", self.param_suffix())
+    }
 }
 
 /// The kind as its token in the text format (`OR*`, `PAR`, `A-rotate`), without the child

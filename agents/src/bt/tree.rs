@@ -141,13 +141,25 @@ struct Run {
 }
 
 impl Tree {
-    /// Builds the run-time tree. `rng` orders the learning selectors' children.
+    /// Builds the run-time tree of a UAV. `rng` orders the learning selectors' children.
     pub fn new(
         spec: &TreeSpec,
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
-        Tree::check(spec)?;
+        check_commands(spec)?;
+        Tree::for_replay(spec, params, rng)
+    }
+
+    /// Builds a tree whose actions command no UAV (`agent bt replay` answers them from a
+    /// script), so the run's limit of commands per tick does not apply; the learning
+    /// selector width, which the engine itself needs, is checked.
+    pub fn for_replay(
+        spec: &TreeSpec,
+        params: LearnParams,
+        rng: Xoshiro256PlusPlus,
+    ) -> Result<Tree, TreeError> {
+        check_width(spec)?;
         let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
         shape.flatten(&spec.root, &mut 0);
         Ok(Tree::with_shape(Arc::new(shape), params, rng))
@@ -156,24 +168,8 @@ impl Tree {
     /// Whether the tree fits the engine's limits (commands per tick, learning selector
     /// width). [`Tree::new`] checks this too; a run checks it before it starts any process.
     pub fn check(spec: &TreeSpec) -> Result<(), TreeError> {
-        let worst = worst_case_commands(&spec.root);
-        if worst > MAX_COMMANDS as u64 {
-            return Err(TreeError::TooManyCommands {
-                file: spec.source.clone(),
-                line: spec.root.line,
-                worst,
-                limit: MAX_COMMANDS,
-            });
-        }
-        if let Some(wide) = widest_learning_selector(&spec.root) {
-            return Err(TreeError::WideLearningSelector {
-                file: spec.source.clone(),
-                line: wide.line,
-                children: wide.children.len(),
-                limit: MAX_LEARNING_CHILDREN,
-            });
-        }
-        Ok(())
+        check_commands(spec)?;
+        check_width(spec)
     }
 
     /// A new, untrained copy of this tree with its own RNG, sharing the shape.
@@ -612,7 +608,7 @@ impl Shape {
             NodeKind::Condition { leaf, .. } => Op::Condition { leaf: *leaf },
         };
         self.nodes.push(NodeShape { op, first: 0, count: 0 });
-        self.labels.push((spec.line, label(&spec.kind)));
+        self.labels.push((spec.line, spec.kind.label()));
         let first = self.children.len();
         self.children.extend(std::iter::repeat_n(0, spec.children.len()));
         for (i, child) in spec.children.iter().enumerate() {
@@ -670,6 +666,33 @@ fn random_untried(tried: u64, remaining: u32, rng: &mut Xoshiro256PlusPlus) -> u
     }
 }
 
+/// Refuses a tree that may issue more commands in one tick than an action message holds.
+fn check_commands(spec: &TreeSpec) -> Result<(), TreeError> {
+    let worst = worst_case_commands(&spec.root);
+    if worst > MAX_COMMANDS as u64 {
+        return Err(TreeError::TooManyCommands {
+            file: spec.source.clone(),
+            line: spec.root.line,
+            worst,
+            limit: MAX_COMMANDS,
+        });
+    }
+    Ok(())
+}
+
+/// Refuses a tree with a learning selector wider than a tick's mask of tried children.
+fn check_width(spec: &TreeSpec) -> Result<(), TreeError> {
+    match widest_learning_selector(&spec.root) {
+        Some(wide) => Err(TreeError::WideLearningSelector {
+            file: spec.source.clone(),
+            line: wide.line,
+            children: wide.children.len(),
+            limit: MAX_LEARNING_CHILDREN,
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The first learning selector (in pre-order) with more children than a tick's mask holds.
 fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
     if spec.kind == NodeKind::Learning && spec.children.len() > MAX_LEARNING_CHILDREN {
@@ -688,13 +711,5 @@ fn worst_case_commands(spec: &NodeSpec) -> u64 {
         NodeKind::Repeat { times } => children.saturating_mul(u64::from(*times)),
         NodeKind::Retry { attempts } => children.saturating_mul(u64::from(*attempts)),
         _ => children,
-    }
-}
-
-/// A node's label as the text format writes it, parameters included (`PAR m=2`).
-fn label(kind: &NodeKind) -> String {
-    match kind.param() {
-        Some((key, value)) => format!("{kind} {key}={value}"),
-        None => kind.to_string(),
     }
 }

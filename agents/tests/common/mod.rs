@@ -347,6 +347,16 @@ impl Bt {
     pub fn table(&self, i: usize) -> QTable {
         self.tree.tables()[i].clone()
     }
+
+    /// Q(`state`, .) of the `i`-th learning selector (zeros if the row was never written).
+    pub fn row(&self, i: usize, state: StateId) -> Vec<f64> {
+        row(&self.table(i), state)
+    }
+}
+
+/// Q(`state`, .) of `table` (zeros if the row was never written).
+pub fn row(table: &QTable, state: StateId) -> Vec<f64> {
+    (0..table.n_actions()).map(|action| table.get(state, action)).collect()
 }
 
 /// A Q-table with the given rows: `rows[k] = (state, [Q(state, 0), Q(state, 1), ...])`.
@@ -360,7 +370,7 @@ pub fn table(n_actions: usize, rows: &[(StateId, &[f64])]) -> QTable {
         }
     }
     for (state, values) in rows {
-        assert_eq!(&table.row(*state), values, "preloading state {state}");
+        assert_eq!(&row(&table, *state), values, "preloading state {state}");
     }
     table
 }

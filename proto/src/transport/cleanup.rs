@@ -82,10 +82,18 @@ pub struct SweepReport {
     pub runs_cleaned: Vec<String>,
     pub live_runs: Vec<String>,
     pub dead_nodes: usize,
+    /// Runs whose files could not be removed (e.g. another user's), with the error's
+    /// message: the sweep went on without them, and its caller says so.
+    pub failed: Vec<(String, String)>,
 }
 
 /// Start-up clean-up across runs: every flockstep run found in `/dev/shm` or under the
 /// iceoryx2 root gets [`cleanup_run`]. Live runs keep everything but their dead nodes.
+///
+/// A run that cannot be cleaned is listed in [`SweepReport::failed`] and skipped: one old
+/// run's files that this user may not remove must not stop every later run, whose files
+/// carry their own prefix (a run id still in use is refused when the run creates its
+/// services). Only an error listing the directories fails the sweep.
 pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
     let mut runs = BTreeSet::new();
     for dir in candidate_dirs() {
@@ -101,12 +109,16 @@ pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
     }
     let mut report = SweepReport::default();
     for run_id in runs {
-        let cleaned = cleanup_run(&run_id)?;
-        report.dead_nodes += cleaned.dead_nodes;
-        if cleaned.live_nodes == 0 {
-            report.runs_cleaned.push(run_id);
-        } else {
-            report.live_runs.push(run_id);
+        match cleanup_run(&run_id) {
+            Ok(cleaned) => {
+                report.dead_nodes += cleaned.dead_nodes;
+                if cleaned.live_nodes == 0 {
+                    report.runs_cleaned.push(run_id);
+                } else {
+                    report.live_runs.push(run_id);
+                }
+            }
+            Err(e) => report.failed.push((run_id, e.to_string())),
         }
     }
     Ok(report)

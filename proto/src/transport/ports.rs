@@ -347,14 +347,6 @@ impl WorldPorts {
             .map_err(|e| self.err(RUN_INFO, "updating connections", e))
     }
 
-    /// Hands the newest observation (history) to agents that subscribed since the last
-    /// publish; iceoryx2 delivers history only when the publisher updates its connections.
-    pub fn serve_late_joiners(&self) -> Result<(), TransportError> {
-        self.observations
-            .update_connections()
-            .map_err(|e| self.err(OBSERVATIONS, "updating connections", e))
-    }
-
     /// Woken by actions and control commands.
     pub fn waiter(&self) -> &Waiter {
         &self.waiter
@@ -482,7 +474,9 @@ impl AgentPorts {
         Ok(ActionLoan { sample, ports: self })
     }
 
-    /// Answers a round with a copy of `action` and wakes the world.
+    /// Answers a round with a copy of `action` and wakes the world: for tests and tools that
+    /// hold a whole `Action` (a rogue sender in `tests/integration/faults.rs`); the agent
+    /// writes its answer in place with [`AgentPorts::loan_action`].
     pub fn publish_action(&self, action: &Action) -> Result<(), TransportError> {
         let mut loan = self.loan_action()?;
         *loan = *action;

@@ -41,7 +41,8 @@ struct PubSubQos {
 
 /// World -> agents. Safe overflow: a hung agent must never block the world; a live agent
 /// reads every round before the next one exists. History 1 lets an agent that attaches late
-/// read the current round (delivered on the world's next publish or `serve_late_joiners`).
+/// read the current round too: iceoryx2 delivers it with the world's next publish, which
+/// comes within a round, as the world publishes every round.
 /// One publisher: while the world lives, no other process can publish observations.
 const OBSERVATIONS_QOS: PubSubQos = PubSubQos {
     publishers: 1,

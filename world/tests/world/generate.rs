@@ -113,7 +113,7 @@ fn maps_for_1_to_64_uavs_load_and_every_target_is_seen() {
         let text = generate_text(&spec).expect("text");
         let map = parse_map("copy.map", &text).expect("parses");
         assert_eq!(&map, s.map());
-        Scenario::from_map("copy", &map).expect("loads from the MapFile");
+        Scenario::from_text("copy", &map.to_text()).expect("loads from the MapFile");
     }
 }
 
@@ -180,7 +180,8 @@ fn a_corrupted_fact_is_refused() {
     let (r, c) = blocked.expect("a fact with a low pose and a cell on its line of sight");
     let mut walled = map.clone();
     walled.cells[r * map.cols + c] = Cell::Occlusion;
-    let err = Scenario::from_map("walled", &walled).expect_err("the line of sight is blocked");
+    let err =
+        Scenario::from_text("walled", &walled.to_text()).expect_err("the line of sight is blocked");
     assert!(matches!(err, WorldError::Fact { .. }), "{err}");
 }
 

@@ -56,12 +56,13 @@ fn a_map_made_in_memory_loads_through_its_text() {
     let mut map = parse_map("tiny.map", TINY).expect("tiny");
     map.name = "generated".to_string();
     map.expects.pop();
-    let scenario = Scenario::from_map("generated.map", &map).expect("loads");
+    let scenario = Scenario::from_text("generated.map", &map.to_text()).expect("loads");
     assert_eq!(scenario.map(), &map);
     assert_eq!(scenario.source_text(), map.to_text());
     // A fact that does not hold is refused with a line of the written text.
     map.expects[0].poses.pop();
-    let message = Scenario::from_map("generated.map", &map).expect_err("refused").to_string();
+    let message =
+        Scenario::from_text("generated.map", &map.to_text()).expect_err("refused").to_string();
     assert!(message.starts_with("generated.map:"), "{message}");
     assert!(message.contains("does not hold"), "{message}");
 }

@@ -14,7 +14,7 @@ fn assert_seen_only_from(scenario: &Scenario, uav: usize, target: usize, poses: 
     assert_eq!(scenario.poses_seeing(uav, target), poses, "UAV{} T{}", uav + 1, target + 1);
     for &p in poses {
         assert_ne!(scenario.visible_targets(uav, p) & (1 << target), 0);
-        assert!(scenario.visible_cells(uav, p).contains(&scenario.target_cell(target)));
+        assert!(scenario.visible_cells(uav, p).contains(&scenario.map().targets[target]));
     }
 }
 
@@ -53,7 +53,7 @@ fn the_accessors_describe_scenario_3() {
     assert_eq!((s3.route_waypoint(0, 0), s3.route_waypoint(0, 10)), ((3, 5), (4, 7)));
     assert_eq!((s3.route_waypoint(1, 0), s3.route_waypoint(1, 4)), ((5, 6), (4, 6)));
     assert_eq!((s3.target_label(0), s3.target_label(1)), ("T1".to_string(), "T2".to_string()));
-    assert_eq!((s3.target_cell(0), s3.target_cell(1)), ((6, 7), (5, 8)));
+    assert_eq!((s3.map().targets[0], s3.map().targets[1]), ((6, 7), (5, 8)));
     assert_eq!(s3.map().expects.len(), 4);
     assert_eq!(s3.visible_targets(1, Pose::new(3, Height::Low, Heading::S)), 0b10);
     assert_eq!(s3.visible_targets(0, s3.start_pose()), 0);

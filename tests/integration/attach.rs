@@ -1,0 +1,79 @@
+//! `agent --attach` asking for a route it cannot have: the world refuses it with the reason,
+//! and the agent exits at once saying it, while the run goes on.
+
+use crate::harness::{
+    assert_nothing_left, catches, pids_with, run_id, scratch, signal, wait_until, world_log,
+    Spawned, AGENT, SUPERVISOR,
+};
+use std::time::{Duration, Instant};
+
+/// Bound of one process here: only a hang reaches it.
+const BOUND: Duration = Duration::from_secs(120);
+
+/// Well below the 30 s an agent waits for admission: a refused agent exits long before.
+const AT_ONCE: Duration = Duration::from_secs(10);
+
+/// Before, an agent that asked for a route of its own (`--uav N`) ignored the world's
+/// refusal and asked again until its 30 s wait ran out, then said only that it timed out
+/// waiting for admission. Now each refusal ends it at once with one line naming the flag
+/// and the problem.
+#[test]
+fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
+    let dir = scratch();
+    let (id, out) = (run_id("refused"), dir.path().display().to_string());
+    // s3 has two routes, both taken by the starting agents; the run lasts until stopped.
+    let run = Spawned::start(
+        SUPERVISOR,
+        &[
+            "--transport",
+            "shm",
+            "--run-id",
+            &id,
+            "--out",
+            &out,
+            "--quiet",
+            "--scenario",
+            "s3",
+            "--uavs",
+            "2",
+            "--episodes",
+            "10000000",
+            "--trials",
+            "1",
+        ],
+    );
+    wait_until("the run's agents", Duration::from_secs(30), || {
+        !pids_with(&format!("--run-id {id} --uav 2")).is_empty()
+    });
+    let cases = [
+        (vec!["--uav", "9"], format!("--uav 9: run `{id}` has 2 routes")),
+        (vec!["--uav", "2"], format!("--uav 2: route 2 of run `{id}` is taken by another agent")),
+        (
+            vec![],
+            format!(
+                "run `{id}`: the world refused this agent: every route of the scenario is taken"
+            ),
+        ),
+    ];
+    for (flags, expected) in cases {
+        let args = [&["--attach", id.as_str(), "--out", out.as_str()][..], &flags].concat();
+        let started = Instant::now();
+        let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
+        let waited = started.elapsed();
+        assert!(!output.status.success(), "expected a refusal\n{report}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(stderr.trim(), format!("agent: error: {expected}"), "\n{report}");
+        assert!(waited < AT_ONCE, "the refused agent took {waited:?} to exit\n{report}");
+    }
+    wait_until("the supervisor to handle SIGINT", Duration::from_secs(30), || {
+        catches(run.pid(), libc::SIGINT)
+    });
+    signal(run.pid(), libc::SIGINT);
+    let (status, report) = run.finish(BOUND);
+    assert_eq!(status.status.code(), Some(130), "the run ends only on Ctrl-C\n{report}");
+    let log = world_log(dir.path());
+    for why in ["the scenario has no such route", "the route asked for is taken by another agent"] {
+        assert!(log.contains(&format!("join refused: {why}")), "{why}:\n{log}");
+    }
+    assert_nothing_left(&id);
+}
