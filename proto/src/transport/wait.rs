@@ -34,7 +34,7 @@ pub struct WaitPolicy {
     /// slices, so the machine has more runnable processes than cores (one such wait may be
     /// the host's doing). A yielding peer is then queued behind that process, while a
     /// blocked one is woken ahead of it: with two barriers and two CPU hogs on 2 cores,
-    /// yielding made about 500 rounds/s and blocking 13 000 to 21 000 (docs/TRANSPORT.md).
+    /// yielding made about 500 rounds/s and blocking 13 000 to 14 000 (docs/TRANSPORT.md).
     /// Zero never backs off.
     pub backoff: Duration,
 }
