@@ -76,10 +76,6 @@ impl Process {
         Ok(self.status)
     }
 
-    pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
-
     /// The last error line the process logged (or its last line), for error messages.
     pub fn last_words(&self) -> String {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();

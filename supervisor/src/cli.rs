@@ -2,7 +2,7 @@
 //!
 //! Without a subcommand it runs an experiment. Defaults follow the thesis: `--uavs 2` runs
 //! scenario 3 with communication, `--uavs 1` scenario 2 without; `--scenario` picks any other
-//! map (s1, s2, s3 or a path).
+//! map (s1, s2, s3, s4, a generated `gen:...` one or a path).
 
 use clap::error::{ContextKind, ContextValue, ErrorKind};
 use clap::parser::ValueSource;
@@ -113,7 +113,7 @@ enum Placed {
 pub enum Command {
     /// Exact optimal expected episode length of a single memoryless UAV on a scenario.
     Optimum {
-        /// s1, s2, s3 or a path to a .map file.
+        /// s1, s2, s3, s4, gen:KEY=VALUE,... or a path to a .map file.
         #[arg(long, default_value = "s2")]
         scenario: String,
     },

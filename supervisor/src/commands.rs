@@ -73,21 +73,23 @@ pub fn eval(
             dir.display()
         );
     }
-    let number = |key: &str| {
-        summary[key].as_u64().with_context(|| format!("{}: no number `{key}`", path.display()))
-    };
+    // Absolute: never read as a built-in name or a `gen:` spec (`--qtables gen:x`).
+    let map = dir.join("scenario.map");
+    let map = map.canonicalize().with_context(|| format!("cannot read {}", map.display()))?;
+    let scenario =
+        map.to_str().with_context(|| format!("{}: the path is not UTF-8", map.display()))?;
     let args = crate::cli::RunArgs {
-        uavs: number("uavs")? as usize,
-        trials: number("trials")? as usize,
-        seed: number("seed")?,
-        tick_cap: number("tick_cap")? as u32,
+        uavs: summary_number(&summary, &path, "uavs")?,
+        trials: summary_number(&summary, &path, "trials")?,
+        seed: summary_number(&summary, &path, "seed")?,
+        tick_cap: summary_number(&summary, &path, "tick_cap")?,
         comm: Some(
             summary["comm"]
                 .as_str()
                 .with_context(|| format!("{}: no `comm`", path.display()))?
                 .to_string(),
         ),
-        scenario: Some(dir.join("scenario.map").display().to_string()),
+        scenario: Some(scenario.to_string()),
         bt: Some(dir.join("tree.bt")),
         episodes: 0,
         eval_episodes: episodes,
@@ -113,4 +115,19 @@ pub fn eval(
     }
     anyhow::ensure!(outcome.complete, "the evaluation was stopped early");
     Ok(())
+}
+
+/// Whole number `key` of the `summary.json` at `path`, as a `T` (a number that does not fit
+/// is named, not cut short).
+fn summary_number<T: TryFrom<u64>>(
+    summary: &serde_json::Value,
+    path: &Path,
+    key: &str,
+) -> Result<T> {
+    let value = summary[key]
+        .as_u64()
+        .with_context(|| format!("{}: no whole number `{key}`", path.display()))?;
+    T::try_from(value)
+        .ok()
+        .with_context(|| format!("{}: `{key}` {value} is out of range", path.display()))
 }

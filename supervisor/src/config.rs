@@ -1,6 +1,7 @@
 //! A run's configuration, resolved from the command line and checked before anything starts.
 
 use crate::cli::{Restart, RunArgs, Transport};
+use crate::results::{EvalPlan, MAX_EVAL_BLOCKS};
 use anyhow::{bail, Context, Result};
 use flockstep_agents::agent::{AgentSpec, UavAgent};
 use flockstep_agents::bt::render::to_text;
@@ -10,6 +11,7 @@ use flockstep_agents::comm::CommMode;
 use flockstep_agents::learning::LearnParams;
 use flockstep_agents::uav::load_uav_tree;
 use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
+use flockstep_world::generate::GenSpec;
 use flockstep_world::scenario::Scenario;
 use flockstep_world::sim::EpisodeConfig;
 use std::path::{Path, PathBuf};
@@ -18,7 +20,9 @@ use std::sync::Arc;
 /// Everything a run needs, validated.
 #[derive(Debug, Clone)]
 pub struct RunConfig {
-    /// As given: `s1`, `s2`, `s3` or a path (child processes get the same string).
+    /// The scenario as the child processes get it: a built-in name (`s1`-`s4`) or a `gen:`
+    /// spec as given, a `.map` path made absolute (the world hands it on to agents that
+    /// attach, which may start in another directory).
     pub scenario_arg: String,
     pub scenario: Arc<Scenario>,
     /// The tree file as given (None: the built-in Fig. 5 tree).
@@ -79,6 +83,7 @@ impl RunConfig {
         if args.agent_timeout_ms == 0 {
             bail!("--agent-timeout-ms must be at least 1: an agent silent that long in a round is dropped");
         }
+        check_episode_counts(args)?;
         let scenario_arg = args.scenario.clone().unwrap_or_else(|| default_scenario(args.uavs));
         let scenario =
             Scenario::resolve(&scenario_arg).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
@@ -90,6 +95,7 @@ impl RunConfig {
                 scenario.n_routes()
             );
         }
+        let scenario_arg = scenario_for_children(&scenario_arg)?;
         let comm = match &args.comm {
             Some(c) => CommMode::parse(c)
                 .with_context(|| format!("--comm `{c}`: expected none, flags or compact"))?,
@@ -189,6 +195,55 @@ pub fn default_comm(uavs: usize) -> CommMode {
     }
 }
 
+/// Refuses episode counts the run cannot count or keep: training episodes over all trials
+/// past `u64`, more periodic evaluations than [`MAX_EVAL_BLOCKS`] (the collector keeps a
+/// total per agent and evaluation from the start), greedy episodes per trial past `u64`.
+fn check_episode_counts(args: &RunArgs) -> Result<()> {
+    if args.episodes.checked_mul(args.trials as u64).is_none() {
+        bail!(
+            "--episodes {} with --trials {}: more training episodes in all than a run can count",
+            args.episodes,
+            args.trials
+        );
+    }
+    let plan = EvalPlan::new(args.episodes, args.eval_every, args.eval_block);
+    if plan.blocks > MAX_EVAL_BLOCKS {
+        bail!(
+            "--eval-every {} with --episodes {}: {} periodic greedy evaluations per trial, at \
+             most {MAX_EVAL_BLOCKS} are supported; evaluate less often",
+            args.eval_every,
+            args.episodes,
+            plan.blocks
+        );
+    }
+    let greedy =
+        plan.blocks.checked_mul(plan.block).and_then(|n| n.checked_add(args.eval_episodes));
+    if greedy.is_none() {
+        bail!(
+            "--eval-block {} with --eval-episodes {}: {} blocks and the final evaluation are \
+             more greedy episodes per trial than a run can count",
+            args.eval_block,
+            args.eval_episodes,
+            plan.blocks
+        );
+    }
+    Ok(())
+}
+
+/// The scenario as the child processes get it: a built-in name (checked first, as
+/// [`Scenario::resolve`] does) or a `gen:` spec unchanged, a path made absolute. The world
+/// hands it on to agents that attach (`RunInfo`), which may have started elsewhere.
+fn scenario_for_children(arg: &str) -> Result<String> {
+    if Scenario::builtin(arg).is_some() || GenSpec::is_gen(arg) {
+        return Ok(arg.to_string());
+    }
+    let path = Path::new(arg).canonicalize().with_context(|| format!("--scenario {arg}"))?;
+    let text = path.to_str().with_context(|| {
+        format!("--scenario {arg}: its absolute path {} is not UTF-8", path.display())
+    })?;
+    Ok(text.to_string())
+}
+
 /// Checks that `dir` holds, for every agent and trial, a snapshot this run can load. Each is
 /// loaded into a fresh copy of its agent, as the in-process runner and the agent process load
 /// it (scenario, slot, communication mode, tree and tables checked), so a bad one is refused
@@ -224,10 +279,6 @@ fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<(
             out.display()
         );
     }
-    let same_dir = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
     if let Some(resume) = resume.filter(|r| same_dir(r, out)) {
         bail!(
             "--overwrite: --resume {} is the results directory it would replace; give another --out",
@@ -235,6 +286,14 @@ fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<(
         );
     }
     Ok(())
+}
+
+/// Whether `a` and `b` are the same existing directory (false if either is missing).
+pub fn same_dir(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
 }
 
 /// `N=SPEC` pairs (N 1-based) into (slot, SPEC), SPEC checked by the agent's own parser.
@@ -263,4 +322,24 @@ fn default_run_id() -> String {
         .map(|d| d.as_secs())
         .unwrap_or(0);
     format!("run-{}-{}", std::process::id(), secs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Agents that attach read the scenario from the world, and may start elsewhere: a path
+    /// goes on absolute, names and specs as given.
+    #[test]
+    fn a_scenario_path_goes_to_the_children_absolute_and_names_as_given() {
+        for spec in ["s1", "s4", "gen:uavs=3"] {
+            assert_eq!(scenario_for_children(spec).unwrap(), spec);
+        }
+        // Unit tests run in the crate's directory.
+        let relative = "../world/maps/s1_one_uav_one_target.map";
+        let absolute = scenario_for_children(relative).unwrap();
+        let expected = Path::new(env!("CARGO_MANIFEST_DIR")).join(relative).canonicalize();
+        assert_eq!(Path::new(&absolute), expected.unwrap());
+        assert!(!absolute.contains(".."), "{absolute}");
+    }
 }

@@ -93,6 +93,14 @@ pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
         };
         let (row_agent, smoothed) = parse()
             .with_context(|| format!("{}:{}: expected {CURVE_HEADER}", path.display(), i + 1))?;
+        // `inf`, `NaN` and `1e400` parse as numbers, but are no episode length to plot.
+        anyhow::ensure!(
+            smoothed.is_finite() && smoothed >= 0.0,
+            "{}:{}: smoothed_length `{}` is not an episode length (a finite number >= 0)",
+            path.display(),
+            i + 1,
+            fields[3]
+        );
         if row_agent == agent {
             values.push(smoothed);
         }
@@ -129,6 +137,11 @@ mod tests {
             e.ends_with("curve.csv:3: expected episode,agent,mean_length,smoothed_length"),
             "{e}"
         );
+        for bad in ["inf", "NaN", "1e400", "-1"] {
+            let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n1,1,4,{bad}\n"));
+            let expected = format!("curve.csv:3: smoothed_length `{bad}` is not an episode length");
+            assert!(e.contains(&expected), "{e}");
+        }
         let e = refused(&format!("{CURVE_HEADER}\n0,2,4,4\n"));
         assert!(e.ends_with("curve.csv: no rows for agent 1"), "{e}");
     }

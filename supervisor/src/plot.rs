@@ -81,12 +81,26 @@ pub fn plot_curves(
     references: &[Reference],
 ) -> Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow!("cannot draw {}: {e}", path.display());
-    let episodes = series.iter().flat_map(|s| s.points.iter().map(|p| p.0)).fold(1.0f64, f64::max);
+    // plotters never finishes laying out an axis over a range that is not finite, so every
+    // point must be finite, every length >= 0 too (which keeps the second panel's range
+    // finite), and the axis top, 5% above the largest length, finite.
+    let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    if let Some(bad) = xs.clone().find(|x| !x.is_finite()) {
+        return Err(err(&format!("iteration {bad} is not finite")));
+    }
+    let episodes = xs.fold(1.0f64, f64::max);
     let all = series
         .iter()
         .flat_map(|s| s.points.iter().map(|p| p.1))
         .chain(references.iter().map(|r| r.value));
-    let top = all.fold(1.0f64, f64::max) * 1.05;
+    if let Some(bad) = all.clone().find(|y| !(y.is_finite() && *y >= 0.0)) {
+        return Err(err(&format!("episode length {bad} is not a finite number >= 0")));
+    }
+    let highest = all.fold(1.0f64, f64::max);
+    let top = highest * 1.05;
+    if !top.is_finite() {
+        return Err(err(&format!("episode length {highest:e} is too large to plot")));
+    }
     let root = SVGBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let root = root.titled(title, ("sans-serif", 22)).map_err(|e| err(&e))?;
@@ -276,6 +290,28 @@ mod tests {
         assert!(texts.iter().any(|t| t == caption), "no panel captioned `{caption}`");
         // Only the fitted axis of the second panel has a tick between 12 and 13.
         assert!(texts.iter().any(|t| t == "12.5"), "no tick label 12.5 in {texts:?}");
+    }
+
+    /// plotters never returns from an axis over a range that is not finite (tried: 0..inf).
+    #[test]
+    fn lengths_that_are_not_finite_or_too_large_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("curve.svg");
+        for (value, expected) in [
+            (f64::INFINITY, "episode length inf is not a finite number >= 0"),
+            (f64::NAN, "episode length NaN is not a finite number >= 0"),
+            (-1.0, "episode length -1 is not a finite number >= 0"),
+            // 5% above it is past f64::MAX.
+            (1.75e308, "episode length 1.75e308 is too large to plot"),
+        ] {
+            let series = [Series::from_values("UAV1".into(), &[40.0, value])];
+            let e = plot_curves(&path, "test", &series, &[]).unwrap_err().to_string();
+            assert!(e.ends_with(expected), "{value}: {e}");
+            let reference = [Reference { label: "optimum".into(), value, detail: None }];
+            let ok = [Series::from_values("UAV1".into(), &[40.0, 30.0])];
+            let e = plot_curves(&path, "test", &ok, &reference).unwrap_err().to_string();
+            assert!(e.ends_with(expected), "reference {value}: {e}");
+        }
     }
 
     #[test]

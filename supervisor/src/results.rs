@@ -60,6 +60,11 @@ pub struct GreedyStats {
     pub per_trial: Vec<f64>,
 }
 
+/// Periodic greedy evaluations a trial may have (`--eval-every`): the collector keeps a total
+/// per agent and evaluation from the start (24 bytes each, 2.4 MB per agent at this cap), and
+/// each is a row of `greedy_curve.csv` and a point of the plot.
+pub const MAX_EVAL_BLOCKS: u64 = 100_000;
+
 /// Where greedy-evaluation episodes belong: periodic blocks during training, then the final
 /// evaluation. Evaluation episodes are numbered through all blocks of a trial.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -79,7 +84,10 @@ impl EvalPlan {
 
     /// The periodic block of evaluation episode `index`, or None for the final evaluation.
     fn block_of(&self, index: u64) -> Option<usize> {
-        (index < self.blocks * self.block).then(|| (index / self.block) as usize)
+        // Saturating: past `u64`, every episode number is in a periodic block (a run's
+        // settings are checked to stay below, see `RunConfig::resolve`).
+        let periodic = self.blocks.saturating_mul(self.block);
+        (index < periodic).then(|| (index / self.block) as usize)
     }
 }
 
@@ -131,17 +139,19 @@ impl Collector {
             file.write_all(CSV_HEADER.as_bytes())?;
             Ok(file)
         };
-        Ok(Collector {
+        let mut collector = Collector {
             episodes_csv: open("episodes.csv")?,
             greedy_csv: open("greedy_episodes.csv")?,
-            train: vec![vec![Vec::new(); trials]; agents],
-            train_truncated: vec![0; agents],
-            greedy: vec![vec![(0, 0, 0); trials]; agents],
+            train: Vec::new(),
+            train_truncated: Vec::new(),
+            greedy: Vec::new(),
             plan,
-            periodic: vec![vec![(0, 0, 0); plan.blocks as usize]; agents],
+            periodic: Vec::new(),
             ticks: vec![0; trials],
             next_episode: vec![[0; 2]; trials],
-        })
+        };
+        collector.grow(agents);
+        Ok(collector)
     }
 
     /// Records one finished episode of one trial.
@@ -163,11 +173,19 @@ impl Collector {
                 report.episode
             );
         }
+        let mut end = report.start_tick;
+        for slot in slots_in(report.members) {
+            let length = report.lengths[slot];
+            // The world's numbers: bad ones are an error, never an overflow.
+            end = end.max(report.start_tick.checked_add(length.into()).with_context(|| {
+                format!(
+                    "episode report for trial {trial}: start tick {} plus length {length} is \
+                     past the largest tick",
+                    report.start_tick
+                )
+            })?);
+        }
         *next += 1;
-        let end = slots_in(report.members)
-            .map(|slot| report.start_tick + u64::from(report.lengths[slot]))
-            .max()
-            .unwrap_or(report.start_tick);
         self.ticks[trial] = self.ticks[trial].max(end);
         for slot in slots_in(report.members) {
             if slot >= self.train.len() {
@@ -209,7 +227,7 @@ impl Collector {
         Ok(())
     }
 
-    /// Makes room for agents that joined the run after it started.
+    /// Makes room for `agents` agents: those the run starts with, and any that join later.
     fn grow(&mut self, agents: usize) {
         let trials = self.ticks.len();
         self.train.resize(agents, vec![Vec::new(); trials]);
@@ -326,5 +344,18 @@ mod tests {
             "{error}"
         );
         assert_eq!(collector.train_lengths()[0][1], vec![13], "the bad report was not recorded");
+    }
+
+    /// Reports come from another process: numbers past `u64` are an error, not a panic.
+    #[test]
+    fn a_report_whose_end_is_past_the_largest_tick_is_an_error() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
+        let late = EpisodeReport { start_tick: u64::MAX - 12, ..report(0, Phase::Train, 0) };
+        let error = collector.record(&late).unwrap_err().to_string();
+        assert!(error.contains("start tick 18446744073709551603 plus length 13"), "{error}");
+        let fits = EpisodeReport { start_tick: u64::MAX - 13, ..late };
+        collector.record(&fits).expect("the same episode, ending on the largest tick");
+        assert_eq!(collector.rounds(), u64::MAX);
     }
 }

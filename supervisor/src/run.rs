@@ -10,6 +10,8 @@ use crate::recorder::Recorder;
 use crate::results::{Collector, EvalPlan};
 use crate::summary;
 use anyhow::{Context, Result};
+use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
+use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -55,7 +57,8 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     let e = &config.episodes;
     let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
     let collector = Collector::create(&config.out, config.uavs, config.trials, plan)?;
-    let total = config.episodes.train_episodes * config.trials as u64;
+    // Only the progress bar's length: `RunConfig::resolve` refuses a count past `u64`.
+    let total = config.episodes.train_episodes.saturating_mul(config.trials as u64);
     let mut recorder = Recorder::new(collector, total, config.quiet);
     let started = Instant::now();
     let result = match config.transport {
@@ -92,6 +95,40 @@ fn prepare_out_dir(config: &RunConfig) -> Result<()> {
         .with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
     std::fs::write(config.out.join("tree.bt"), config.tree_text())
         .with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
+    if let Some(resume) = &config.resume {
+        copy_resumed_snapshots(config, resume)?;
+    }
+    Ok(())
+}
+
+/// Copies the snapshots a resumed run starts from into its own `qtables/`, unless they are
+/// there already (`--resume` is `--out`). Its agents then read their tables from `--out`
+/// only, and an agent restarted before it wrote a snapshot of its own goes on from these
+/// rather than from empty tables. Each is read as the agents read it (a complete `.partial`
+/// a crash left stands for a missing file) and written whole.
+fn copy_resumed_snapshots(config: &RunConfig, resume: &Path) -> Result<()> {
+    if crate::config::same_dir(resume, &config.out) {
+        return Ok(());
+    }
+    for slot in 0..config.uavs {
+        for trial in 0..config.trials {
+            let from = snapshot_path(resume, slot, trial);
+            let to = snapshot_path(&config.out, slot, trial);
+            // Checked by `RunConfig::resolve`; read again, it must still be there.
+            let snapshot = read_snapshot(&from)
+                .with_context(|| format!("--resume {}", resume.display()))?
+                .with_context(|| {
+                    format!("--resume {}: no snapshot {}", resume.display(), from.display())
+                })?;
+            let bytes = bincode::serde::encode_to_vec(&snapshot, bincode::config::standard())
+                .with_context(|| format!("cannot encode {}", from.display()))?;
+            if let Some(dir) = to.parent() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("cannot create {}", dir.display()))?;
+            }
+            std::fs::write(&to, bytes).with_context(|| format!("cannot write {}", to.display()))?;
+        }
+    }
     Ok(())
 }
 

@@ -14,6 +14,7 @@ use crate::config::RunConfig;
 use crate::recorder::Recorder;
 use crate::run::Outcome;
 use anyhow::{bail, Context, Result};
+use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     cleanup_run, sweep_stale_runs, RunConfig as RunIdentity, RunServices, SignalMode,
@@ -99,7 +100,7 @@ struct Fleet<'a> {
 }
 
 impl Fleet<'_> {
-    fn spawn_agent(&mut self, slot: usize, resume: bool) -> Result<()> {
+    fn spawn_agent(&mut self, slot: usize, restarted: bool) -> Result<()> {
         let logs = self.config.out.join("logs");
         let (name, log) = match self.restarts[slot] {
             0 => (format!("UAV{}", slot + 1), logs.join(format!("uav{}.log", slot + 1))),
@@ -108,7 +109,7 @@ impl Fleet<'_> {
                 logs.join(format!("uav{}.restart{n}.log", slot + 1)),
             ),
         };
-        let command = agent_command(self.config, slot, resume)?;
+        let command = agent_command(self.config, slot, restarted)?;
         self.processes.push(Process::spawn(&name, command, &log)?);
         self.slots.push(Some(slot));
         Ok(())
@@ -162,8 +163,10 @@ impl Fleet<'_> {
                     && self.restarts[slot] < MAX_RESTARTS
                 {
                     self.restarts[slot] += 1;
+                    // Before the new agent starts: these are the snapshots it reads.
+                    let note = restart_note(self.config, slot);
                     self.spawn_agent(slot, true)?;
-                    notes.push(format!("UAV{} restarted from its latest snapshot", slot + 1));
+                    notes.push(note);
                 } else {
                     control.gone |= 1 << slot;
                     ports.send_control(&control)?;
@@ -195,6 +198,24 @@ impl Fleet<'_> {
     }
 }
 
+/// What a restart of agent `slot` goes on from: its latest snapshots in `--out`, read as the
+/// agent reads them. Trials that have none (no `--resume`, and the agent failed before its
+/// first `--snapshot-every`) start again from empty tables, and the note says so.
+fn restart_note(config: &RunConfig, slot: usize) -> String {
+    let fresh: Vec<String> = (0..config.trials)
+        .filter(|&trial| {
+            !matches!(read_snapshot(&snapshot_path(&config.out, slot, trial)), Ok(Some(_)))
+        })
+        .map(|trial| trial.to_string())
+        .collect();
+    let note = format!("UAV{} restarted from its latest snapshot", slot + 1);
+    if fresh.is_empty() {
+        note
+    } else {
+        format!("{note}; trial(s) {} had none yet and start from empty tables", fresh.join(", "))
+    }
+}
+
 /// The supervisor drains the world's episode records at least this often; the world also
 /// wakes it once per `EPISODE_WAKE_EVERY` records, well before its buffer fills.
 const DRAIN_EVERY: Duration = Duration::from_millis(10);
@@ -217,32 +238,51 @@ fn world_command(config: &RunConfig) -> Result<Command> {
     command
         .arg("--run-id")
         .arg(&config.run_id)
-        .arg("--scenario")
-        .arg(&config.scenario_arg)
         .args(["--uavs", &config.uavs.to_string()])
-        .args(["--trials", &config.trials.to_string()])
-        .args(["--seed", &config.seed.to_string()])
         .args(["--episodes", &config.episodes.train_episodes.to_string()])
         .args(["--eval-episodes", &config.episodes.eval_episodes.to_string()])
         .args(["--eval-every", &config.episodes.eval_every.to_string()])
         .args(["--eval-block", &config.episodes.eval_block.to_string()])
         .args(["--tick-cap", &config.episodes.tick_cap.to_string()])
-        .args(["--comm", config.comm.name()])
-        .args(["--alpha", &config.params.alpha.to_string()])
-        .args(["--gamma", &config.params.gamma.to_string()])
-        .args(["--epsilon", &config.params.epsilon.to_string()])
-        .args(["--agent-timeout-ms", &config.agent_timeout_ms.to_string()])
-        .args(["--parent-pid", &std::process::id().to_string()]);
+        .args(["--agent-timeout-ms", &config.agent_timeout_ms.to_string()]);
+    shared_args(&mut command, config);
     Ok(command)
 }
 
-fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Command> {
+fn agent_command(config: &RunConfig, slot: usize, restarted: bool) -> Result<Command> {
     let mut command = own_executable(crate::ROLE_AGENT)?;
     command
         .arg("run")
         .arg("--run-id")
         .arg(&config.run_id)
         .args(["--uav", &(slot + 1).to_string()])
+        .args(["--snapshot-every", &config.snapshot_every.to_string()])
+        .arg("--out")
+        .arg(&config.out);
+    shared_args(&mut command, config);
+    if let Some(bt) = &config.bt_path {
+        command.arg("--bt").arg(bt);
+    }
+    // A restarted agent goes on from its own latest snapshot in `--out`, where a resumed run
+    // also finds the ones it resumes from (copied there before any process starts).
+    if restarted || config.resume.is_some() {
+        command.arg("--resume").arg(&config.out);
+    }
+    if let Some(dir) = &config.trace_dir {
+        command.arg("--trace").arg(trace_path(dir, slot));
+    }
+    // A fault is injected once: a restarted agent behaves.
+    if let Some((_, fault)) = config.faults.iter().find(|(s, _)| *s == slot).filter(|_| !restarted)
+    {
+        command.args(["--fault", fault]);
+    }
+    Ok(command)
+}
+
+/// The arguments the world and every agent take alike: what the run simulates and learns,
+/// and the supervisor's pid (`--parent-pid`).
+fn shared_args(command: &mut Command, config: &RunConfig) {
+    command
         .arg("--scenario")
         .arg(&config.scenario_arg)
         .args(["--trials", &config.trials.to_string()])
@@ -251,25 +291,7 @@ fn agent_command(config: &RunConfig, slot: usize, resume: bool) -> Result<Comman
         .args(["--alpha", &config.params.alpha.to_string()])
         .args(["--gamma", &config.params.gamma.to_string()])
         .args(["--epsilon", &config.params.epsilon.to_string()])
-        .args(["--snapshot-every", &config.snapshot_every.to_string()])
-        .arg("--out")
-        .arg(&config.out)
         .args(["--parent-pid", &std::process::id().to_string()]);
-    if let Some(bt) = &config.bt_path {
-        command.arg("--bt").arg(bt);
-    }
-    // A restarted agent goes on from its own latest snapshot, a resumed run from the given ones.
-    if let Some(dir) = if resume { Some(&config.out) } else { config.resume.as_ref() } {
-        command.arg("--resume").arg(dir);
-    }
-    if let Some(dir) = &config.trace_dir {
-        command.arg("--trace").arg(trace_path(dir, slot));
-    }
-    // A fault is injected once: a restarted agent behaves.
-    if let Some((_, fault)) = config.faults.iter().find(|(s, _)| *s == slot).filter(|_| !resume) {
-        command.args(["--fault", fault]);
-    }
-    Ok(command)
 }
 
 /// Where agent `slot` writes its `--trace-dir` trace.

@@ -11,6 +11,10 @@ use flockstep_world::optimum::{optimum, optimum_with_known_target};
 use serde_json::{json, Value};
 use std::path::Path;
 
+/// The iceoryx2 version the workspace requires (`Cargo.toml`), recorded in every summary;
+/// a test keeps the two in step.
+const ICEORYX2_VERSION: &str = "0.10";
+
 /// Window of `final_mean_episode_length`: UAV1's last 1000 training episodes per trial.
 pub const FINAL_WINDOW: usize = 1000;
 
@@ -25,9 +29,10 @@ pub fn summary(
     let greedy: Vec<_> = (0..agents).map(|a| collector.greedy(a)).collect();
     let ticks = collector.ticks();
     let per_second = |n: u64| if wall_seconds > 0.0 { n as f64 / wall_seconds } else { 0.0 };
+    let final_means: Vec<_> = (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect();
     json!({
         "flockstep_version": env!("CARGO_PKG_VERSION"),
-        "iceoryx2_version": "0.10",
+        "iceoryx2_version": ICEORYX2_VERSION,
         "run_id": config.run_id,
         "transport": format!("{:?}", config.transport).to_lowercase(),
         "complete": outcome.complete,
@@ -56,8 +61,8 @@ pub fn summary(
         "rounds_per_second": per_second(collector.rounds()),
         "env_steps_per_second": per_second(recorder.env_steps()),
         "final_window": FINAL_WINDOW,
-        "final_mean_episode_length": (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect::<Vec<_>>().first().cloned().flatten(),
-        "final_mean_episode_length_per_agent": (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect::<Vec<_>>(),
+        "final_mean_episode_length": final_means.first().copied().flatten(),
+        "final_mean_episode_length_per_agent": final_means,
         "train_truncated": (0..agents).map(|a| collector.train_truncated(a)).collect::<Vec<_>>(),
         "greedy_episode_length": greedy.iter().map(|g| g.as_ref().map(|g| g.mean())).collect::<Vec<_>>(),
         "greedy_episode_length_per_trial": greedy.iter().map(|g| g.as_ref().map(|g| g.per_trial.clone())).collect::<Vec<_>>(),
@@ -79,4 +84,18 @@ pub fn summary_file(dir: &Path) -> Result<Value> {
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("cannot read {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_recorded_iceoryx2_version_is_the_workspace_requirement() {
+        let manifest = include_str!("../../Cargo.toml");
+        let requirement = format!("\niceoryx2 = \"{}\"\n", super::ICEORYX2_VERSION);
+        assert!(
+            manifest.contains(&requirement),
+            "the workspace Cargo.toml has no `{}`: update ICEORYX2_VERSION",
+            requirement.trim()
+        );
+    }
 }

@@ -11,23 +11,17 @@ use crate::harness::{
 };
 use flockstep_supervisor::results::RUN_OUTPUTS;
 
-/// Runs the supervisor with `args` on both transports, results into `out`; `check` looks at
-/// the error line. Nothing of the run may be left behind.
+/// Runs the supervisor with `args` on both transports (10 episodes unless `args` give
+/// `--episodes`), results into `out`; `check` looks at the error line. Nothing of the run
+/// may be left behind.
 fn fails_on_both_transports(out: &str, args: &[&str], check: impl Fn(&str, &str)) {
     let id = run_id("bad-input");
     for transport in ["inproc", "shm"] {
         let mut all = args.to_vec();
-        all.extend([
-            "--transport",
-            transport,
-            "--out",
-            out,
-            "--episodes",
-            "10",
-            "--quiet",
-            "--run-id",
-            &id,
-        ]);
+        all.extend(["--transport", transport, "--out", out, "--quiet", "--run-id", &id]);
+        if !args.contains(&"--episodes") {
+            all.extend(["--episodes", "10"]);
+        }
         check(&error_line(&all), transport);
         assert_nothing_left(&id);
     }
@@ -177,6 +171,62 @@ fn settings_that_would_make_a_run_meaningless() {
     let line =
         error_line(&["eval", "--qtables", &dir.path().display().to_string(), "--episodes", "0"]);
     assert!(line.contains("eval --episodes must be at least 1"), "{line}");
+}
+
+/// Counts a run could not count or keep are refused by the flags that make them, before the
+/// run: they used to overflow, or to allocate a total per periodic evaluation up front.
+#[test]
+fn episode_counts_past_what_a_run_can_count_or_keep() {
+    let most = u64::MAX.to_string();
+    for_both_transports(
+        &["--episodes", &most, "--trials", "2"],
+        &[&format!(
+            "--episodes {most} with --trials 2: more training episodes in all than a run can count"
+        )],
+    );
+    for_both_transports(
+        &["--eval-every", "1", "--episodes", "10000000000"],
+        &["--eval-every 1 with --episodes 10000000000: 9999999999 periodic greedy evaluations per trial, at most 100000 are supported"],
+    );
+    for_both_transports(
+        &["--eval-every", "1000", "--episodes", "2001", "--eval-block", &most],
+        &[&format!("--eval-block {most} with --eval-episodes 1000: 2 blocks and the final evaluation are more greedy episodes per trial than a run can count")],
+    );
+}
+
+/// `eval` takes its settings from the run's `summary.json`: a number there that does not fit
+/// is named with its file and field, not cut short.
+#[test]
+fn eval_refuses_a_summary_number_out_of_range() {
+    let dir = scratch();
+    for file in ["scenario.map", "tree.bt"] {
+        std::fs::write(dir.path().join(file), b"").expect("write a file");
+    }
+    let summary = r#"{"uavs": 1, "trials": 1, "seed": 1, "tick_cap": 4294967296, "comm": "none"}"#;
+    std::fs::write(dir.path().join("summary.json"), summary).expect("write summary.json");
+    let qtables = dir.path().display().to_string();
+    let line = error_line(&["eval", "--qtables", &qtables]);
+    let expected = format!("{qtables}/summary.json: `tick_cap` 4294967296 is out of range");
+    assert!(line.ends_with(&expected), "{line}");
+}
+
+/// `plot` reads `curve.csv` files it did not write: `inf`, `NaN` or `1e400` there used to
+/// reach plotters, which never returned from an axis up to infinity.
+#[test]
+fn plot_refuses_a_curve_whose_length_is_not_finite() {
+    let dir = scratch();
+    let curve = dir.path().join("curve.csv");
+    let out = dir.path().join("both.svg");
+    for bad in ["inf", "NaN", "1e400", "-3"] {
+        let text = format!("episode,agent,mean_length,smoothed_length\n0,1,40,40\n1,1,41,{bad}\n");
+        std::fs::write(&curve, text).expect("write curve.csv");
+        let spec = format!("{}=bad", curve.display());
+        let line = error_line(&["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+        let expected =
+            format!("{}:3: smoothed_length `{bad}` is not an episode length", curve.display());
+        assert!(line.contains(&expected), "{line}");
+        assert!(!out.exists(), "a plot was drawn from `{bad}`");
+    }
 }
 
 /// The hidden test aids are input too: a bad one is refused before any agent runs, not

@@ -2,7 +2,8 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    episode_rows, error_line, number, run_ok, scratch, summary, supervise, words, SUPERVISOR,
+    assert_nothing_left, episode_rows, error_line, number, run_id, run_ok, scratch, summary,
+    supervise, words, SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 
@@ -84,6 +85,42 @@ fn resume_continues_from_the_learned_level() {
     assert!(
         resumed < 20.0 && resumed < scratch_mean / 2.0,
         "resumed {resumed} vs from scratch {scratch_mean}"
+    );
+}
+
+/// A resumed run's agent that fails before its first periodic snapshot (`--snapshot-every`,
+/// 10 000 episodes) is restarted from the tables the run resumed from, which the run copied
+/// into its own `qtables/`: it used to be pointed at `--out`, which held none yet, and
+/// started from empty tables while the summary said "from its latest snapshot".
+#[test]
+fn an_agent_restarted_before_its_first_snapshot_goes_on_from_the_resumed_tables() {
+    let first = scratch();
+    let setup = words("--scenario s3 --uavs 2 --trials 1 --seed 5");
+    supervise(first.path(), &[&setup[..], &words("--transport inproc --episodes 3000")].concat());
+    let second = scratch();
+    let (id, resume) = (run_id("resume-restart"), first.path().display().to_string());
+    let resumed = words("--transport shm --episodes 600 --eval-episodes 0 --restart on-failure");
+    let fault = ["--fault", "1=crash-at-round=300", "--resume", &resume, "--run-id", &id];
+    let s = supervise(second.path(), &[&setup[..], &resumed, &fault].concat());
+    assert_nothing_left(&id);
+    let notes = s["notes"].to_string();
+    assert!(notes.contains("UAV1 restarted from its latest snapshot"), "{notes}");
+    assert!(!notes.contains("empty tables"), "{notes}");
+    let log = std::fs::read_to_string(second.path().join("logs").join("uav1.restart1.log"))
+        .expect("the restarted agent's log");
+    assert!(!log.contains("starts from scratch"), "{log}");
+    let uav1 = |dir: &std::path::Path| -> Vec<[u64; 6]> {
+        episode_rows(dir).into_iter().filter(|r| r[1] == 1).collect()
+    };
+    let mean =
+        |rows: &[[u64; 6]]| rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64;
+    let rows = uav1(second.path());
+    let gap =
+        rows.windows(2).position(|w| w[1][2] != w[0][2] + 1).expect("a gap where UAV1 was down");
+    let (untrained, after) = (mean(&uav1(first.path())[..200]), mean(&rows[gap + 1..]));
+    assert!(
+        after < untrained / 2.0,
+        "restarted from empty tables? untrained {untrained}, after the restart {after}"
     );
 }
 
