@@ -19,7 +19,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
     exit_with_parent, termination_requested, AgentPorts, ObservationSample, RunConfig, RunServices,
-    SignalMode,
+    SignalMode, TransportError,
 };
 use flockstep_proto::{
     FieldError, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -50,7 +50,8 @@ pub struct LearnerArgs {
     /// Save this agent's Q-tables every N training episodes of a trial (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub snapshot_every: u64,
-    /// The world silent this long is presumed dead.
+    /// The world silent this long is presumed dead: also bounds the wait for the run's
+    /// services at start, so `--attach` to a run that is not running fails after it.
     #[arg(long, default_value_t = 30_000)]
     pub world_timeout_ms: u64,
     /// Test aid: append one line per round and trial to this CSV file (see `trace.rs`).
@@ -247,7 +248,8 @@ fn serve(
     out: &Path,
 ) -> Result<()> {
     let faults = learner.fault.as_deref().map_or(Ok(Vec::new()), parse_faults)?;
-    let ports = RunServices::open(run)?.into_agent()?;
+    let world_timeout = Duration::from_millis(learner.world_timeout_ms);
+    let ports = open_ports(run, world_timeout, setup.is_none())?;
     if faults.contains(&Fault::IgnoreSigterm) {
         // SAFETY: setting a signal's disposition to "ignore".
         unsafe {
@@ -257,7 +259,6 @@ fn serve(
     if faults.contains(&Fault::CrashBeforeJoin) {
         std::process::abort();
     }
-    let world_timeout = Duration::from_millis(learner.world_timeout_ms);
     for fault in &faults {
         if let Fault::JoinAfterFile(path) = fault {
             ports.waiter().wait(
@@ -321,6 +322,26 @@ fn serve(
         }
         session.save_periodic()?;
         action.send()?;
+    }
+}
+
+/// Opens the run's services and this agent's ports. A world that has not created the
+/// services yet is silent like any other, so `--world-timeout-ms` bounds the wait for them
+/// too. An attaching agent that finds none says so with the run id it was given: most likely
+/// the id is mistyped or its run has ended.
+fn open_ports(run: &RunConfig, world_timeout: Duration, attaching: bool) -> Result<AgentPorts> {
+    let run = RunConfig { open_timeout: world_timeout, ..run.clone() };
+    match RunServices::open(&run).and_then(RunServices::into_agent) {
+        Err(TransportError::ServiceMissing { waited, .. })
+            if attaching && !termination_requested() =>
+        {
+            bail!(
+                "run `{}`: not running: no world created its services within {waited:?} \
+                 (--world-timeout-ms)",
+                run.run_id
+            )
+        }
+        opened => Ok(opened?),
     }
 }
 

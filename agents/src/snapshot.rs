@@ -41,6 +41,14 @@ pub enum SnapshotError {
     Format { found: u32 },
     #[error("snapshot was learned with {what} `{found}`, this agent uses `{expected}`")]
     Mismatch { what: &'static str, found: String, expected: String },
+    /// Slots counted from 0, named as users see them: UAV1 is slot 0.
+    #[error("snapshot was learned by UAV{}, this agent is UAV{}", .found + 1, .expected + 1)]
+    Slot { found: u32, expected: usize },
+    /// The first line where the two trees' canonical texts differ (one node a line, in
+    /// pre-order; a run's `tree.bt` is in this form), `None` past a tree's end: the whole
+    /// trees would take a screen.
+    #[error("snapshot was learned with another tree: line {line} of their canonical form (as in a run's tree.bt) is {} in the snapshot's, {} in this agent's", tree_line(.found), tree_line(.expected))]
+    Tree { line: usize, found: Option<String>, expected: Option<String> },
     #[error("snapshot holds trial {found}, read here for trial {expected} (a renamed file?)")]
     Trial { found: u32, expected: usize },
     #[error("inconsistent snapshot: {0}")]
@@ -57,7 +65,7 @@ impl Snapshot {
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
         let (snapshot, _): (Snapshot, usize) =
             bincode::serde::decode_from_slice(bytes, bincode::config::standard())
-                .map_err(|e| SnapshotError::Decode(e.to_string()))?;
+                .map_err(|e| SnapshotError::Decode(decode_cause(&e)))?;
         if snapshot.format != FORMAT {
             return Err(SnapshotError::Format { found: snapshot.format });
         }
@@ -89,8 +97,12 @@ impl Snapshot {
         };
         check("scenario", &self.scenario, scenario)?;
         check("communication mode", self.comm.name(), comm.name())?;
-        check("agent slot", &self.slot.to_string(), &agent.slot().to_string())?;
-        check("tree", &self.tree, tree)?;
+        if self.slot as usize != agent.slot() {
+            return Err(SnapshotError::Slot { found: self.slot, expected: agent.slot() });
+        }
+        if let Some(mismatch) = tree_mismatch(&self.tree, tree) {
+            return Err(mismatch);
+        }
         if self.trial as usize != trial {
             return Err(SnapshotError::Trial { found: self.trial, expected: trial });
         }
@@ -113,6 +125,50 @@ impl Snapshot {
         agent.set_trained_episodes(self.episodes);
         Ok(())
     }
+}
+
+/// What made bincode refuse a snapshot's bytes, in words: bincode's own `Display` is its
+/// `Debug` form (`UnexpectedEnd { additional: 4 }`). A file cut short, the usual damage,
+/// says "truncated"; serde's own messages (an unknown communication mode) are kept.
+fn decode_cause(error: &bincode::error::DecodeError) -> String {
+    use bincode::error::DecodeError;
+    match error {
+        DecodeError::UnexpectedEnd { .. } | DecodeError::Io { .. } => "truncated".to_string(),
+        DecodeError::Utf8 { .. } => "a text field is not UTF-8".to_string(),
+        DecodeError::UnexpectedVariant { type_name, found, .. } => {
+            format!("no {type_name} is numbered {found}")
+        }
+        DecodeError::LimitExceeded | DecodeError::OutsideUsizeRange(_) => {
+            "a length too large for this machine".to_string()
+        }
+        DecodeError::Other(message) => message.to_string(),
+        DecodeError::OtherString(message) => message.clone(),
+        _ => "malformed bytes".to_string(),
+    }
+}
+
+/// The [`SnapshotError::Tree`] of canonical tree texts `found` (the snapshot's) and
+/// `expected` (the agent's) if they differ: the first line where they part.
+fn tree_mismatch(found: &str, expected: &str) -> Option<SnapshotError> {
+    // Split at every newline, not `lines()`: two different texts then differ in some part,
+    // a missing final newline included.
+    let (mut found_lines, mut expected_lines) = (found.split('\n'), expected.split('\n'));
+    for line in 1.. {
+        match (found_lines.next(), expected_lines.next()) {
+            (None, None) => break,
+            (f, e) if f != e => {
+                let (found, expected) = (f.map(str::to_string), e.map(str::to_string));
+                return Some(SnapshotError::Tree { line, found, expected });
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// One side of a [`SnapshotError::Tree`]: the line quoted, or "missing" past its tree's end.
+fn tree_line(line: &Option<String>) -> String {
+    line.as_ref().map_or_else(|| "missing".to_string(), |line| format!("`{line}`"))
 }
 
 /// The bytes of a [`Snapshot`] of what `agent` has learned so far, encoded from the agent's
@@ -438,6 +494,48 @@ mod tests {
             ),
             "{err}"
         );
+    }
+
+    /// The error of restoring into UAV1 of s3 (tree `tree`) a snapshot of it changed by
+    /// `change`.
+    fn refusal(change: impl FnOnce(&mut Snapshot)) -> String {
+        let mut agent = uav1();
+        let mut snapshot = Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
+        change(&mut snapshot);
+        let part = &mut agent.trials_mut()[0];
+        snapshot.restore(part, 0, "s3", CommMode::Flags, "tree").unwrap_err().to_string()
+    }
+
+    /// Slots are numbered from 0 inside, UAVs from 1 for users. Before, the message said
+    /// "agent slot `1`, this agent uses `0`" of UAV2's snapshot read for UAV1.
+    #[test]
+    fn a_snapshot_of_another_uav_names_both_as_uavs() {
+        let err = refusal(|snapshot| snapshot.slot = 1);
+        assert_eq!(err, "snapshot was learned by UAV2, this agent is UAV1");
+    }
+
+    /// Another tree is named by its first differing line, in one line. Before, the message
+    /// quoted both trees whole, about 20 lines for the thesis's tree.
+    #[test]
+    fn a_snapshot_of_another_tree_names_the_first_differing_line() {
+        let err = refusal(|snapshot| snapshot.tree = "OR 2\n- A-rotate 0\n".to_string());
+        assert_eq!(
+            err,
+            "snapshot was learned with another tree: line 1 of their canonical form (as in a \
+             run's tree.bt) is `OR 2` in the snapshot's, `tree` in this agent's"
+        );
+        let err = refusal(|snapshot| snapshot.tree = "tree\n- A-rotate 0".to_string());
+        let end = "line 2 of their canonical form (as in a run's tree.bt) is `- A-rotate 0` in \
+                   the snapshot's, missing in this agent's";
+        assert!(err.ends_with(end), "{err}");
+    }
+
+    /// A cut file says "truncated". Before, it said bincode's `UnexpectedEnd { additional: 4 }`.
+    #[test]
+    fn a_truncated_snapshot_says_so_in_words() {
+        let bytes = encode_snapshot(&uav1().trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let err = Snapshot::decode(&bytes[..bytes.len() - 1]).unwrap_err().to_string();
+        assert_eq!(err, "not a flockstep Q-table snapshot: truncated");
     }
 
     #[test]

@@ -77,3 +77,26 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
     }
     assert_nothing_left(&id);
 }
+
+/// `agent --attach` to a run id that no world serves waits `--world-timeout-ms` for the
+/// run's services, then exits with one line naming the run id and the flag. Before, it
+/// waited a fixed 10 s whatever the flag said.
+#[test]
+fn attaching_to_a_run_that_is_not_running_waits_the_world_timeout() {
+    let dir = scratch();
+    let (id, out) = (run_id("absent"), dir.path().display().to_string());
+    let args = ["--attach", id.as_str(), "--out", out.as_str(), "--world-timeout-ms", "300"];
+    let started = Instant::now();
+    let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
+    let waited = started.elapsed();
+    assert!(!output.status.success(), "expected a failure\n{report}");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let expected = format!(
+        "agent: error: run `{id}`: not running: no world created its services within 300ms \
+         (--world-timeout-ms)"
+    );
+    assert_eq!(stderr.trim(), expected, "\n{report}");
+    // 300 ms and the process's start, far below the old fixed 10 s even on a loaded machine.
+    assert!(waited < Duration::from_secs(5), "the agent took {waited:?} to give up\n{report}");
+    assert_nothing_left(&id);
+}

@@ -60,3 +60,20 @@ fn replay_takes_a_tree_past_the_run_limit_of_commands_per_tick() {
     let steps = vec!["A-step@2=SUCCESS"; 20].join(" ");
     assert_eq!(report, format!("tick 1: SUCCESS  ticked {steps}  halted -\n"));
 }
+
+/// A tree past the run's limit of commands per tick is refused with the line of the node to
+/// change: the deepest node past the limit on its own (here the `REPEAT` on line 7, under a
+/// learning selector), and the whole tree's worst case beside it. Before, every such error
+/// named line 1, the root.
+#[test]
+fn a_tree_past_the_command_limit_names_the_node_at_fault() {
+    let dir = crate::harness::scratch();
+    let tree = dir.path().join("deep.bt");
+    let text = "OR 2\n- AND 2\n-- C-seeTarget 0\n-- A-endEpisode 0\n- LOR 2\n-- A-rotate 0\n-- REPEAT 1 n=20\n--- A-elevate 0\n";
+    std::fs::write(&tree, text).expect("write the tree");
+    let tree = tree.display().to_string();
+    let out = dir.path().join("out").display().to_string();
+    let line = crate::harness::error_line(&["--bt", &tree, "--out", &out, "--episodes", "1"]);
+    let expected = format!("supervisor: error: {tree}:7: this REPEAT n=20 may issue up to 20 commands in one tick (the whole tree up to 22); the limit is 16");
+    assert_eq!(line, expected);
+}

@@ -9,6 +9,9 @@
 //!
 //! [`optimum_with_known_target`] is the mean shortest episode when the UAV knows the target
 //! in advance: no policy, with or without communication, can do better.
+//!
+//! [`route_optima`] computes both for every route of a scenario, what `supervisor optimum`
+//! prints: a route without an optimum says why beside the other routes' numbers.
 
 mod search;
 
@@ -55,6 +58,29 @@ pub struct KnownTarget {
     pub expected_ticks: f64,
     /// `lengths[k]`: shortest episode (ticks) when the target is k.
     pub lengths: Vec<u64>,
+}
+
+/// Both optima of one route flown alone, each computed on its own: a route may lack the
+/// memoryless optimum (no trajectory sees every target without repeating a state) and still
+/// have the known-target bound, and a scenario's routes without either do not hide the
+/// others' numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RouteOptima {
+    /// The route's slot: 0 is UAV1.
+    pub uav: usize,
+    pub memoryless: Result<Optimum, OptimumError>,
+    pub known_target: Result<KnownTarget, OptimumError>,
+}
+
+/// The optima of every route of `scenario`, flown alone, in route order.
+pub fn route_optima(scenario: &Scenario) -> Vec<RouteOptima> {
+    (0..scenario.n_routes())
+        .map(|uav| RouteOptima {
+            uav,
+            memoryless: optimum(scenario, uav),
+            known_target: optimum_with_known_target(scenario, uav),
+        })
+        .collect()
 }
 
 /// The exact best expected episode length of UAV `uav` alone under a memoryless policy.
@@ -155,6 +181,34 @@ fn move_name(command: Command) -> &'static str {
         Command::Elevate => "elevate",
         Command::DeElevate => "deElevate",
         Command::NextWaypoint => "waypointTranslation",
+    }
+}
+
+impl fmt::Display for RouteOptima {
+    /// One line naming the route, `UAV1: memoryless optimum 11.5000 ticks (per target [8,
+    /// 15]); knowing the target 10.5000`, then the optimal trajectory. A missing optimum is
+    /// its error, which names the route itself: `UAV2 sees T1 from no pose of its route: ...`
+    /// (once when both optima fail for the same reason, as a target the route never sees).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.memoryless {
+            Ok(best) => write!(
+                f,
+                "UAV{}: memoryless optimum {:.4} ticks (per target {:?})",
+                self.uav + 1,
+                best.expected_ticks,
+                best.lengths
+            )?,
+            Err(error) => write!(f, "{error}")?,
+        }
+        match &self.known_target {
+            Ok(known) => writeln!(f, "; knowing the target {:.4}", known.expected_ticks)?,
+            Err(error) if self.memoryless.as_ref().err() == Some(error) => writeln!(f)?,
+            Err(error) => writeln!(f, "; {error}")?,
+        }
+        match &self.memoryless {
+            Ok(best) => write!(f, "{best}"),
+            Err(_) => Ok(()),
+        }
     }
 }
 

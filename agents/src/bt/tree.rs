@@ -55,8 +55,17 @@ pub enum TraceEvent {
 /// Why a tree cannot run.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum TreeError {
-    #[error("{file}:{line}: this tree may issue up to {worst} commands in one tick; the limit is {limit} (a REPEAT/RETRY count or many actions under one node)")]
-    TooManyCommands { file: String, line: usize, worst: u64, limit: usize },
+    /// `line` and `node` name the deepest node whose own worst case is past the limit (a
+    /// `REPEAT` count, or a composite whose children together are): the one to change.
+    #[error("{file}:{line}: this {node} may issue up to {worst} commands in one tick{}; the limit is {limit}", whole_tree(*.worst, *.tree_worst))]
+    TooManyCommands {
+        file: String,
+        line: usize,
+        node: String,
+        worst: u64,
+        tree_worst: u64,
+        limit: usize,
+    },
     #[error("{file}:{line}: this learning selector has {children} children; the limit is {limit}")]
     WideLearningSelector { file: String, line: usize, children: usize, limit: usize },
 }
@@ -668,16 +677,28 @@ fn random_untried(tried: u64, remaining: u32, rng: &mut Xoshiro256PlusPlus) -> u
 
 /// Refuses a tree that may issue more commands in one tick than an action message holds.
 fn check_commands(spec: &TreeSpec) -> Result<(), TreeError> {
-    let worst = worst_case_commands(&spec.root);
-    if worst > MAX_COMMANDS as u64 {
-        return Err(TreeError::TooManyCommands {
+    let (tree_worst, culprit) = worst_case_commands(&spec.root);
+    match culprit {
+        Some((node, worst)) => Err(TreeError::TooManyCommands {
             file: spec.source.clone(),
-            line: spec.root.line,
+            line: node.line,
+            node: node.kind.label(),
             worst,
+            tree_worst,
             limit: MAX_COMMANDS,
-        });
+        }),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// What a [`TreeError::TooManyCommands`] adds when the node it names is not the root: the
+/// worst case of the whole tree, which is what the limit applies to.
+fn whole_tree(worst: u64, tree_worst: u64) -> String {
+    if tree_worst == worst {
+        String::new()
+    } else {
+        format!(" (the whole tree up to {tree_worst})")
+    }
 }
 
 /// Refuses a tree with a learning selector wider than a tick's mask of tried children.
@@ -702,14 +723,75 @@ fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
 }
 
 /// Upper bound of the commands one tick can issue: each action issues at most one; loops
-/// multiply their child's bound.
-fn worst_case_commands(spec: &NodeSpec) -> u64 {
-    let children: u64 = spec.children.iter().map(worst_case_commands).sum();
-    match &spec.kind {
+/// multiply their child's bound. Also the node to blame if the bound is past
+/// [`MAX_COMMANDS`], with its own bound: the deepest node past it (followed down the first
+/// child past it), since the root's line says nothing when a `REPEAT` deep inside is the
+/// cause; `None` if the tree is within the limit.
+fn worst_case_commands(spec: &NodeSpec) -> (u64, Option<(&NodeSpec, u64)>) {
+    let mut children: u64 = 0;
+    let mut culprit = None;
+    for child in &spec.children {
+        let (worst, deeper) = worst_case_commands(child);
+        children = children.saturating_add(worst);
+        culprit = culprit.or(deeper);
+    }
+    let worst = match &spec.kind {
         NodeKind::Action { .. } => 1,
         NodeKind::Condition { .. } => 0,
         NodeKind::Repeat { times } => children.saturating_mul(u64::from(*times)),
         NodeKind::Retry { attempts } => children.saturating_mul(u64::from(*attempts)),
         _ => children,
+    };
+    if culprit.is_none() && worst > MAX_COMMANDS as u64 {
+        culprit = Some((spec, worst));
+    }
+    (worst, culprit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bt::parse::parse_tree;
+    use crate::uav::UavCatalog;
+
+    /// The line and message of the command-limit error for tree `text`.
+    fn refusal(text: &str) -> (usize, String) {
+        let spec = parse_tree("t.bt", text, &UavCatalog).expect("a valid tree");
+        match Tree::check(&spec) {
+            Err(error @ TreeError::TooManyCommands { line, .. }) => (line, error.to_string()),
+            other => panic!("expected the command limit, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_repeat_past_the_limit_is_named_not_the_root() {
+        let (line, message) = refusal("OR 2\n- REPEAT 1 n=100\n-- A-rotate 0\n- A-elevate 0\n");
+        assert_eq!(line, 2);
+        assert_eq!(message, "t.bt:2: this REPEAT n=100 may issue up to 100 commands in one tick (the whole tree up to 101); the limit is 16");
+    }
+
+    #[test]
+    fn the_deepest_node_past_the_limit_is_named() {
+        // Both RETRY (line 2) and REPEAT (line 3) are past the limit; the REPEAT is the cause.
+        let (line, _) = refusal("AND 1\n- RETRY 1 n=2\n-- REPEAT 1 n=17\n--- A-rotate 0\n");
+        assert_eq!(line, 3);
+    }
+
+    #[test]
+    fn children_past_the_limit_only_together_name_their_parent() {
+        let text = format!("OR 2\n- C-seeTarget 0\n- AND 17\n{}", "-- A-rotate 0\n".repeat(17));
+        let (line, message) = refusal(&text);
+        assert_eq!(line, 3);
+        assert_eq!(
+            message,
+            "t.bt:3: this AND may issue up to 17 commands in one tick; the limit is 16"
+        );
+    }
+
+    #[test]
+    fn a_tree_at_the_limit_passes() {
+        let spec =
+            parse_tree("t.bt", "REPEAT 1 n=16\n- A-rotate 0\n", &UavCatalog).expect("a tree");
+        assert_eq!(Tree::check(&spec), Ok(()));
     }
 }

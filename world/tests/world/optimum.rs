@@ -1,7 +1,9 @@
 //! The exact optimum of one memoryless UAV, and the bound of a UAV that knows the target.
 
 use flockstep_proto::{Heading, Height, Pose};
-use flockstep_world::optimum::{optimum, optimum_with_known_target, Optimum};
+use flockstep_world::optimum::{
+    optimum, optimum_with_known_target, route_optima, KnownTarget, Optimum, RouteOptima,
+};
 use flockstep_world::{OptimumError, Scenario};
 
 use crate::common::TINY;
@@ -78,6 +80,49 @@ fn a_target_the_uav_never_sees_makes_the_optimum_infinite() {
     assert!(err.to_string().contains("UAV2 sees T1 from no pose of its route"), "{err}");
     assert!(optimum_with_known_target(&tiny, 1).is_err());
     assert_eq!(optimum(&tiny, 2), Err(OptimumError::NoSuchUav { uav: 2, n: 2 }));
+}
+
+/// `supervisor optimum` prints every route: one that never sees a target says so, naming
+/// itself once, and the other routes' optima are still there. Before, the first such route
+/// failed the whole command, with its name twice ("UAV2: UAV2 sees ...").
+#[test]
+fn a_route_without_an_optimum_does_not_hide_the_others() {
+    let tiny = Scenario::from_text("tiny.map", TINY).expect("tiny");
+    let routes = route_optima(&tiny);
+    assert_eq!(routes.len(), 2);
+    assert_eq!(routes[0].memoryless, optimum(&tiny, 0));
+    assert_eq!(routes[0].known_target, optimum_with_known_target(&tiny, 0));
+    let uav1 = routes[0].to_string();
+    let best = optimum(&tiny, 0).expect("UAV1's optimum");
+    let bound = optimum_with_known_target(&tiny, 0).expect("UAV1's bound");
+    let header = format!(
+        "UAV1: memoryless optimum {:.4} ticks (per target {:?}); knowing the target {:.4}\n",
+        best.expected_ticks, best.lengths, bound.expected_ticks
+    );
+    assert_eq!(uav1, format!("{header}{best}"));
+    let unseeable = OptimumError::Unseeable { uav: 1, label: "T1".to_string() };
+    assert_eq!(routes[1].memoryless, Err(unseeable.clone()));
+    assert_eq!(routes[1].known_target, Err(unseeable));
+    assert_eq!(
+        routes[1].to_string(),
+        "UAV2 sees T1 from no pose of its route: the expected episode length is infinite\n"
+    );
+}
+
+/// A route whose memoryless optimum is infinite for want of a simple path still has its
+/// known-target bound, and shows it.
+#[test]
+fn a_route_without_a_memoryless_optimum_still_shows_its_bound() {
+    let route = RouteOptima {
+        uav: 0,
+        memoryless: Err(OptimumError::NoSimplePath { uav: 0 }),
+        known_target: Ok(KnownTarget { expected_ticks: 10.5, lengths: vec![8, 13] }),
+    };
+    assert_eq!(
+        route.to_string(),
+        "UAV1 has no trajectory that sees every target without repeating a state: no \
+         memoryless policy ends every episode; knowing the target 10.5000\n"
+    );
 }
 
 #[test]
