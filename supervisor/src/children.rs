@@ -20,7 +20,12 @@ pub struct Process {
     /// carries a peak over `exec`); in the runs measured that was below what a world or an
     /// agent uses itself.
     pub peak_rss_kib: Option<u64>,
+    /// When [`Process::bring_down`] sent it SIGTERM.
+    terminated_at: Option<Instant>,
 }
+
+/// How long a process has to leave after SIGTERM before it gets SIGKILL.
+pub const TERM_GRACE: Duration = Duration::from_secs(2);
 
 impl Process {
     /// Spawns `command` as `name`, its stdout and stderr going to `log`.
@@ -43,6 +48,7 @@ impl Process {
             log: log.to_path_buf(),
             status: None,
             peak_rss_kib: None,
+            terminated_at: None,
         })
     }
 
@@ -74,6 +80,30 @@ impl Process {
             }
         }
         Ok(self.status)
+    }
+
+    /// Whether the process is known to have exited (as of the last [`Process::status`]).
+    pub fn exited(&self) -> bool {
+        self.status.is_some()
+    }
+
+    /// The shutdown ladder for this one process, a step at a time so that the caller goes on
+    /// with its work meanwhile: SIGTERM at the first call, SIGKILL at a call once
+    /// [`TERM_GRACE`] has passed since. The caller calls again until the process has exited.
+    pub fn bring_down(&mut self) {
+        match self.terminated_at {
+            None => {
+                self.signal(libc::SIGTERM);
+                self.terminated_at = Some(Instant::now());
+            }
+            Some(at) if at.elapsed() >= TERM_GRACE => self.signal(libc::SIGKILL),
+            Some(_) => {}
+        }
+    }
+
+    /// Whether [`Process::bring_down`] has begun to bring it down.
+    pub fn brought_down(&self) -> bool {
+        self.terminated_at.is_some()
     }
 
     /// The last error line the process logged (or its last line), for error messages.
@@ -116,8 +146,9 @@ fn wait_all(processes: &mut [Process], grace: Duration) -> Result<bool> {
     }
 }
 
-/// The shutdown ladder: let them leave for `grace`, then SIGTERM and wait 2 s, then SIGKILL
-/// and wait until they are gone. Returns the names of those that had to be signalled.
+/// The shutdown ladder: let them leave for `grace`, then SIGTERM and wait [`TERM_GRACE`],
+/// then SIGKILL and wait until they are gone. Returns the names of those that had to be
+/// signalled.
 pub fn shut_down(processes: &mut [Process], grace: Duration) -> Result<Vec<String>> {
     let mut forced = Vec::new();
     if wait_all(processes, grace)? {
@@ -129,7 +160,7 @@ pub fn shut_down(processes: &mut [Process], grace: Duration) -> Result<Vec<Strin
             p.signal(libc::SIGTERM);
         }
     }
-    if wait_all(processes, Duration::from_secs(2))? {
+    if wait_all(processes, TERM_GRACE)? {
         return Ok(forced);
     }
     for p in processes.iter_mut() {

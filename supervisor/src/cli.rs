@@ -337,19 +337,22 @@ pub struct RunArgs {
     /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long)]
     pub quiet: bool,
+    // The flags below are of the multi-process transport only: None when not given, so that
+    // an in-process run can refuse them rather than ignore them (`RunConfig::resolve`).
     /// An agent silent this long within a round is presumed dead and dropped (shm; a
-    /// crashed agent is noticed sooner, its process is watched).
-    #[arg(long, default_value_t = 500)]
-    pub agent_timeout_ms: u64,
+    /// crashed agent is noticed sooner, its process is watched) [default: 500].
+    #[arg(long)]
+    pub agent_timeout_ms: Option<u64>,
     /// What to do when an agent process fails (shm): nothing, or start it again from its
-    /// latest Q-table snapshot.
-    #[arg(long, value_enum, default_value_t = Restart::Never)]
-    pub restart: Restart,
+    /// latest Q-table snapshot [default: never].
+    #[arg(long, value_enum)]
+    pub restart: Option<Restart>,
     /// Agents save their Q-tables every N training episodes of a trial (shm; 0: only at
     /// the end). Restarts resume from these. The barrier waits while an agent writes one
-    /// (about 0.3 ms for s3): 10 000 episodes are about 0.7 s of a 4-trial s3 run.
-    #[arg(long, default_value_t = 10_000)]
-    pub snapshot_every: u64,
+    /// (about 0.3 ms for s3): 10 000 episodes are about 0.7 s of a 4-trial s3 run
+    /// [default: 10000].
+    #[arg(long)]
+    pub snapshot_every: Option<u64>,
     /// Test aid (shm only), off by default: `N=SPEC` makes agent N misbehave; SPEC is
     /// `crash-before-join`, `join-after-file=PATH`, `crash-at-round=R`, `hang-at-round=R` or
     /// `ignore-sigterm` (several separated by commas).

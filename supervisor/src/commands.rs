@@ -1,8 +1,11 @@
 //! The supervisor's helper subcommands: `optimum`, `eval`, `generate` and `plot`.
 
 use crate::curve::read_smoothed;
+use crate::output;
 use crate::plot::{plot_curves, Series};
 use anyhow::{Context, Result};
+use flockstep_agents::comm::CommMode;
+use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
 use flockstep_world::optimum::{optimum as memoryless_optimum, optimum_with_known_target};
 use flockstep_world::scenario::Scenario;
 use std::path::Path;
@@ -16,21 +19,28 @@ pub fn optimum(spec: &str) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
         let known = optimum_with_known_target(&scenario, uav)
             .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
-        println!(
+        output::line(&format!(
             "{} UAV{}: memoryless optimum {:.4} ticks (per target {:?}); knowing the target {:.4}",
             scenario.name(),
             uav + 1,
             best.expected_ticks,
             best.lengths,
             known.expected_ticks
-        );
-        println!("{best}");
+        ))?;
+        output::line(&best.to_string())?;
     }
     Ok(())
 }
 
-/// Draws UAV1's smoothed curve of several runs on one plot (`PATH=LABEL` each).
+/// Draws UAV1's smoothed curve of several runs on one plot (`PATH=LABEL` each). The plot is
+/// SVG, the one format drawn here: another extension is refused rather than given SVG.
 pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
+    let svg = out.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    anyhow::ensure!(
+        svg,
+        "--out {}: plots are written as SVG only; give a file name ending in .svg",
+        out.display()
+    );
     let mut loaded = Vec::new();
     for spec in curves {
         let (path, label) = spec
@@ -38,9 +48,16 @@ pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
             .with_context(|| format!("--curve `{spec}`: expected PATH=LABEL"))?;
         loaded.push((label.to_string(), read_smoothed(Path::new(path), 1)?));
     }
-    let series: Vec<Series> =
-        loaded.iter().map(|(label, values)| Series::from_values(label.clone(), values)).collect();
+    let series: Vec<Series> = loaded
+        .iter()
+        .map(|(label, points)| Series::from_points(label.clone(), &episode_points(points)))
+        .collect();
     plot_curves(out, title, &series, &[])
+}
+
+/// A curve's (episode, length) points as the plot takes them.
+pub fn episode_points(points: &[(u64, f64)]) -> Vec<(f64, f64)> {
+    points.iter().map(|&(episode, length)| (episode as f64, length)).collect()
 }
 
 /// Writes the generated scenario `spec` as a `.map` file (it loads back as it is).
@@ -48,13 +65,14 @@ pub fn generate(spec: &str, out: &Path) -> Result<()> {
     let text =
         flockstep_world::generate::generate_text(spec).map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
-    println!("{}", out.display());
-    Ok(())
+    output::line(&out.display().to_string())
 }
 
 /// Evaluates the snapshots of the run in `dir` greedily: the same scenario (its
 /// `scenario.map`), tree (`tree.bt`), agents, trials, seed and communication as recorded in
-/// its `summary.json`, no training. Prints the greedy length of every agent.
+/// its `summary.json`, no training. Prints the greedy length of every agent. Returns whether
+/// the evaluation ran to its end: stopped by Ctrl-C, what it evaluated so far is printed and
+/// written, flagged `"complete": false` as a run's partial results are.
 pub fn eval(
     dir: &Path,
     episodes: u64,
@@ -62,7 +80,7 @@ pub fn eval(
     transport: crate::cli::Transport,
     defaults: &crate::cli::RunArgs,
     stop: &std::sync::atomic::AtomicBool,
-) -> Result<()> {
+) -> Result<bool> {
     anyhow::ensure!(episodes > 0, "eval --episodes must be at least 1 (greedy episodes per trial)");
     let summary = crate::summary::summary_file(dir)?;
     let path = dir.join("summary.json");
@@ -78,17 +96,32 @@ pub fn eval(
     let map = map.canonicalize().with_context(|| format!("cannot read {}", map.display()))?;
     let scenario =
         map.to_str().with_context(|| format!("{}: the path is not UTF-8", map.display()))?;
+    // The run's settings come from its summary.json: one that does not fit is named there,
+    // not as the command-line flag it stands for.
+    let comm =
+        summary["comm"].as_str().with_context(|| format!("{}: no `comm`", path.display()))?;
+    anyhow::ensure!(
+        CommMode::parse(comm).is_some(),
+        "{}: `comm` \"{comm}\" is none of none, flags, compact",
+        path.display()
+    );
+    let uavs = summary_number(&summary, &path, "uavs", 1..=MAX_AGENTS as u64)?;
+    let trials = summary_number(&summary, &path, "trials", 1..=MAX_TRIALS as u64)?;
+    let seed = summary_number(&summary, &path, "seed", 0..=u64::MAX)?;
+    let tick_cap = summary_number(&summary, &path, "tick_cap", 1..=u32::MAX.into())?;
+    // Its errors name the file.
+    let routes = Scenario::resolve(scenario).map_err(|e| anyhow::anyhow!("{e}"))?.n_routes();
+    anyhow::ensure!(
+        uavs <= routes,
+        "{}: `uavs` {uavs}, but its scenario.map has {routes} route(s)",
+        path.display()
+    );
     let args = crate::cli::RunArgs {
-        uavs: summary_number(&summary, &path, "uavs")?,
-        trials: summary_number(&summary, &path, "trials")?,
-        seed: summary_number(&summary, &path, "seed")?,
-        tick_cap: summary_number(&summary, &path, "tick_cap")?,
-        comm: Some(
-            summary["comm"]
-                .as_str()
-                .with_context(|| format!("{}: no `comm`", path.display()))?
-                .to_string(),
-        ),
+        uavs,
+        trials,
+        seed,
+        tick_cap,
+        comm: Some(comm.to_string()),
         scenario: Some(scenario.to_string()),
         bt: Some(dir.join("tree.bt")),
         episodes: 0,
@@ -106,27 +139,42 @@ pub fn eval(
     for (agent, length) in
         result["greedy_episode_length"].as_array().into_iter().flatten().enumerate()
     {
-        let truncated = &result["greedy_truncated"][agent];
-        println!(
-            "UAV{} greedy episode length {length} ({truncated} of {} episodes truncated)",
-            agent + 1,
-            result["greedy_episodes"][agent]
-        );
+        let line = match length.as_f64() {
+            Some(length) => format!(
+                "UAV{} greedy episode length {length:.2} ({} of {} episodes truncated)",
+                agent + 1,
+                result["greedy_truncated"][agent],
+                result["greedy_episodes"][agent]
+            ),
+            None => format!("UAV{}: no greedy episode ended", agent + 1),
+        };
+        output::line(&line)?;
     }
-    anyhow::ensure!(outcome.complete, "the evaluation was stopped early");
-    Ok(())
+    if !outcome.complete {
+        output::message(&format!(
+            "supervisor: the evaluation was stopped early: the lengths above are partial \
+             ({} says \"complete\": false)",
+            config.out.join("summary.json").display()
+        ));
+    }
+    Ok(outcome.complete)
 }
 
-/// Whole number `key` of the `summary.json` at `path`, as a `T` (a number that does not fit
-/// is named, not cut short).
+/// Whole number `key` of the `summary.json` at `path`, as a `T`, checked to be in `range`.
 fn summary_number<T: TryFrom<u64>>(
     summary: &serde_json::Value,
     path: &Path,
     key: &str,
+    range: std::ops::RangeInclusive<u64>,
 ) -> Result<T> {
     let value = summary[key]
         .as_u64()
         .with_context(|| format!("{}: no whole number `{key}`", path.display()))?;
+    anyhow::ensure!(
+        range.contains(&value),
+        "{}: `{key}` {value} is out of range {range:?}",
+        path.display()
+    );
     T::try_from(value)
         .ok()
         .with_context(|| format!("{}: `{key}` {value} is out of range", path.display()))

@@ -80,7 +80,7 @@ impl RunConfig {
         if args.smoothing == Some(0) {
             bail!("--smoothing must be at least 1 episode");
         }
-        if args.agent_timeout_ms == 0 {
+        if args.agent_timeout_ms == Some(0) {
             bail!("--agent-timeout-ms must be at least 1: an agent silent that long in a round is dropped");
         }
         check_episode_counts(args)?;
@@ -144,11 +144,14 @@ impl RunConfig {
             overwrite: args.overwrite,
             trace_dir: args.trace_dir.clone(),
             resume: args.resume.clone(),
-            agent_timeout_ms: args.agent_timeout_ms,
-            restart: args.restart,
-            snapshot_every: args.snapshot_every,
+            agent_timeout_ms: args.agent_timeout_ms.unwrap_or(DEFAULT_AGENT_TIMEOUT_MS),
+            restart: args.restart.unwrap_or(Restart::Never),
+            snapshot_every: args.snapshot_every.unwrap_or(DEFAULT_SNAPSHOT_EVERY),
             faults: parse_faults(&args.faults, args.uavs)?,
         };
+        if config.transport == Transport::Inproc {
+            refuse_process_flags(args)?;
+        }
         if let Some(dir) = &config.resume {
             check_snapshots(&config, dir, resume_flag)?;
         }
@@ -171,6 +174,34 @@ impl RunConfig {
     /// The tree in canonical text form (stored with snapshots and results).
     pub fn tree_text(&self) -> String {
         to_text(&self.tree)
+    }
+}
+
+/// `--agent-timeout-ms` unless given: a round that waits this long for an agent is rare
+/// enough not to be slow, and a hung agent is noticed within half a second.
+const DEFAULT_AGENT_TIMEOUT_MS: u64 = 500;
+
+/// `--snapshot-every` unless given (README: 10 000 episodes of a 4-trial s3 run cost about
+/// 0.7 s of waiting for snapshots).
+const DEFAULT_SNAPSHOT_EVERY: u64 = 10_000;
+
+/// Refuses, for an in-process run, the flags that only watch or shape agent processes: it
+/// has none, and a flag it would ignore is refused as elsewhere (the values were checked
+/// first, so a bad value is named as such on both transports).
+fn refuse_process_flags(args: &RunArgs) -> Result<()> {
+    let given = [
+        ("--agent-timeout-ms", args.agent_timeout_ms.is_some()),
+        ("--restart", args.restart.is_some()),
+        ("--snapshot-every", args.snapshot_every.is_some()),
+        ("--fault", !args.faults.is_empty()),
+        ("--trace-dir", args.trace_dir.is_some()),
+    ];
+    match given.into_iter().find(|&(_, given)| given) {
+        Some((flag, _)) => bail!(
+            "{flag} applies to agent processes, and an in-process run (--transport inproc) has \
+             none: give --transport shm, or leave {flag} out"
+        ),
+        None => Ok(()),
     }
 }
 

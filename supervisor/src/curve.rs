@@ -1,6 +1,7 @@
 //! Learning curves: episode length against iterations (episodes), mean over trials,
 //! smoothed by a trailing moving average, as the thesis plots them (Fig. 10, Fig. 11).
 
+use crate::results::Flown;
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -10,23 +11,37 @@ use std::path::Path;
 pub struct Curve {
     /// 1-based agent number.
     pub agent: usize,
-    /// Mean over trials of the length of episode i (only episodes every trial reached).
+    /// The trials' episode numbers the curve has a point for: those every trial has a length
+    /// of this agent for. An agent that attached starts late; the episodes some trial lacks
+    /// (an agent restarted after a failure was down in them) are left out.
+    pub episodes: Vec<u64>,
+    /// Mean over trials of the length of each of `episodes`.
     pub mean: Vec<f64>,
-    /// Trailing moving average of `mean` over `window` episodes.
+    /// Trailing moving average of `mean` over `window` points.
     pub smoothed: Vec<f64>,
 }
 
-/// Curves of every agent from `lengths[agent][trial][episode]`.
-pub fn curves(lengths: &[Vec<Vec<u32>>], window: usize) -> Vec<Curve> {
+/// Curves of every agent from `lengths[agent][trial]`.
+pub fn curves(lengths: &[Vec<Flown>], window: usize) -> Vec<Curve> {
     lengths
         .iter()
         .enumerate()
         .map(|(slot, trials)| {
-            let episodes = trials.iter().map(Vec::len).min().unwrap_or(0);
-            let mean: Vec<f64> = (0..episodes)
-                .map(|e| trials.iter().map(|t| f64::from(t[e])).sum::<f64>() / trials.len() as f64)
-                .collect();
-            Curve { agent: slot + 1, smoothed: moving_average(&mean, window.max(1)), mean }
+            let from = trials.iter().map(|t| t.span().start).max().unwrap_or(0);
+            let to = trials.iter().map(|t| t.span().end).min().unwrap_or(0);
+            let (episodes, mean): (Vec<u64>, Vec<f64>) = (from..to)
+                .filter_map(|e| {
+                    let sum: f64 =
+                        trials.iter().map(|t| t.get(e).map(f64::from)).sum::<Option<_>>()?;
+                    Some((e, sum / trials.len() as f64))
+                })
+                .unzip();
+            Curve {
+                agent: slot + 1,
+                smoothed: moving_average(&mean, window.max(1)),
+                episodes,
+                mean,
+            }
         })
         .collect()
 }
@@ -54,7 +69,7 @@ const CURVE_HEADER: &str = "episode,agent,mean_length,smoothed_length";
 pub fn write_csv(path: &Path, curves: &[Curve]) -> Result<()> {
     let mut text = format!("{CURVE_HEADER}\n");
     for curve in curves {
-        for (e, (mean, smooth)) in curve.mean.iter().zip(&curve.smoothed).enumerate() {
+        for ((e, mean), smooth) in curve.episodes.iter().zip(&curve.mean).zip(&curve.smoothed) {
             writeln!(text, "{e},{},{mean:.4},{smooth:.4}", curve.agent)
                 .expect("writing to a String");
         }
@@ -75,8 +90,9 @@ pub fn write_greedy_csv(path: &Path, greedy: &[Vec<(u64, f64, u64)>]) -> Result<
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Reads agent `agent`'s smoothed curve back from a `curve.csv`.
-pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
+/// Reads agent `agent`'s smoothed curve back from a `curve.csv`: (episode, smoothed length)
+/// points.
+pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<(u64, f64)>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let header = text.lines().next().unwrap_or_default();
@@ -85,13 +101,17 @@ pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
         "{}:1: not a curve.csv: expected the header `{CURVE_HEADER}`, found `{header}`",
         path.display()
     );
-    let mut values = Vec::new();
+    let mut points = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let fields: Vec<&str> = line.split(',').collect();
-        let parse = || -> Option<(usize, f64)> {
-            Some((fields.get(1)?.parse().ok()?, fields.get(3)?.parse().ok()?))
+        let parse = || -> Option<(u64, usize, f64)> {
+            Some((
+                fields.first()?.parse().ok()?,
+                fields.get(1)?.parse().ok()?,
+                fields.get(3)?.parse().ok()?,
+            ))
         };
-        let (row_agent, smoothed) = parse()
+        let (episode, row_agent, smoothed) = parse()
             .with_context(|| format!("{}:{}: expected {CURVE_HEADER}", path.display(), i + 1))?;
         // `inf`, `NaN` and `1e400` parse as numbers, but are no episode length to plot.
         anyhow::ensure!(
@@ -102,11 +122,11 @@ pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<f64>> {
             fields[3]
         );
         if row_agent == agent {
-            values.push(smoothed);
+            points.push((episode, smoothed));
         }
     }
-    anyhow::ensure!(!values.is_empty(), "{}: no rows for agent {agent}", path.display());
-    Ok(values)
+    anyhow::ensure!(!points.is_empty(), "{}: no rows for agent {agent}", path.display());
+    Ok(points)
 }
 
 #[cfg(test)]
@@ -119,24 +139,37 @@ mod tests {
         assert_eq!(moving_average(&[1.0, 2.0, 3.0], 1), vec![1.0, 2.0, 3.0]);
     }
 
+    /// An agent's lengths in one trial: `runs` of (first episode, lengths).
+    fn flown(runs: &[(u64, &[u32])]) -> Flown {
+        let mut flown = Flown::default();
+        for &(first, lengths) in runs {
+            for (e, &length) in (first..).zip(lengths) {
+                flown.push(e, length);
+            }
+        }
+        flown
+    }
+
     #[test]
     fn a_written_curve_reads_back_and_other_files_are_refused_with_their_line() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("curve.csv");
-        let c = curves(&[vec![vec![4, 2]], vec![vec![9, 7]]], 2);
+        let c = curves(&[vec![flown(&[(0, &[4, 2])])], vec![flown(&[(5, &[9, 7])])]], 2);
         write_csv(&path, &c).unwrap();
-        assert_eq!(read_smoothed(&path, 2).unwrap(), vec![9.0, 8.0]);
+        assert_eq!(read_smoothed(&path, 2).unwrap(), vec![(5, 9.0), (6, 8.0)]);
         let refused = |text: &str| {
             std::fs::write(&path, text).unwrap();
             read_smoothed(&path, 1).unwrap_err().to_string()
         };
         let e = refused("a hostname\n");
         assert!(e.ends_with("curve.csv:1: not a curve.csv: expected the header `episode,agent,mean_length,smoothed_length`, found `a hostname`"), "{e}");
-        let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n1,one,2,3\n"));
-        assert!(
-            e.ends_with("curve.csv:3: expected episode,agent,mean_length,smoothed_length"),
-            "{e}"
-        );
+        for bad_row in ["1,one,2,3", "one,1,2,3"] {
+            let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n{bad_row}\n"));
+            assert!(
+                e.ends_with("curve.csv:3: expected episode,agent,mean_length,smoothed_length"),
+                "{e}"
+            );
+        }
         for bad in ["inf", "NaN", "1e400", "-1"] {
             let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n1,1,4,{bad}\n"));
             let expected = format!("curve.csv:3: smoothed_length `{bad}` is not an episode length");
@@ -148,9 +181,29 @@ mod tests {
 
     #[test]
     fn curves_average_over_trials_up_to_the_shortest_trial() {
-        let lengths = vec![vec![vec![10, 20, 30], vec![30, 40]]];
+        let lengths = vec![vec![flown(&[(0, &[10, 20, 30])]), flown(&[(0, &[30, 40])])]];
         let c = curves(&lengths, 1);
         assert_eq!(c[0].agent, 1);
+        assert_eq!(c[0].episodes, vec![0, 1]);
         assert_eq!(c[0].mean, vec![20.0, 30.0]);
+    }
+
+    /// An agent that attached flies from a later episode in each trial (trials reach their
+    /// episode boundaries at different rounds); one restarted misses the episodes it was down.
+    /// Its curve is placed at the trials' episode numbers, from the first episode every trial
+    /// has for it, and leaves out the episodes a trial lacks.
+    #[test]
+    fn a_late_or_interrupted_agent_is_placed_at_the_trials_episode_numbers() {
+        let attached = vec![flown(&[(3, &[8, 6, 4, 2])]), flown(&[(4, &[10, 6, 2])])];
+        let c = &curves(&[attached], 2)[0];
+        assert_eq!((c.episodes.clone(), c.mean.clone()), (vec![4, 5, 6], vec![8.0, 5.0, 2.0]));
+        assert_eq!(c.smoothed, vec![8.0, 6.5, 3.5]);
+        let restarted =
+            vec![flown(&[(0, &[9, 9]), (4, &[5, 5])]), flown(&[(0, &[7, 7, 7, 7, 3, 3])])];
+        let c = &curves(&[restarted], 1)[0];
+        assert_eq!(
+            (c.episodes.clone(), c.mean.clone()),
+            (vec![0, 1, 4, 5], vec![8.0, 8.0, 4.0, 4.0])
+        );
     }
 }

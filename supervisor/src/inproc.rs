@@ -100,8 +100,16 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
             recorder.redraw();
         }
     };
+    // Every agent's tables are written that can be; then a failure fails the run, as a lost
+    // result (an agent process that cannot write its tables fails a multi-process run too).
+    let mut unsaved = Vec::new();
     for agent in &simulation.agents {
-        write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)?;
+        if let Err(e) =
+            write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)
+        {
+            unsaved.push(format!("UAV{}: {e:#}", agent.slot() + 1));
+        }
     }
+    anyhow::ensure!(unsaved.is_empty(), "final Q-tables not all saved: {}", unsaved.join("; "));
     Ok(finished)
 }

@@ -1,11 +1,16 @@
 //! The supervisor: runs experiments, in one process or as one world and N agent processes,
 //! and turns what the world reports into a results directory.
 
+// `summary.json` is one `json!` literal of some 50 fields, past the macro's recursion at the
+// default limit of 128.
+#![recursion_limit = "256"]
+
 pub mod children;
 pub mod cli;
 pub mod config;
 pub mod curve;
 pub mod inproc;
+pub mod output;
 pub mod plot;
 pub mod recorder;
 pub mod reproduce;
@@ -23,7 +28,8 @@ use std::sync::Arc;
 pub const ROLE_WORLD: &str = "world";
 pub const ROLE_AGENT: &str = "agent";
 
-/// Exit status of a run stopped by Ctrl-C / SIGTERM (results written, flagged partial).
+/// Exit status of a run or an evaluation stopped by Ctrl-C / SIGTERM (results written,
+/// flagged partial).
 pub const EXIT_INTERRUPTED: i32 = 130;
 
 /// The `supervisor` binary. It is also the world and the agent programs (`supervisor world
@@ -42,7 +48,7 @@ pub fn main() -> std::process::ExitCode {
     match outcome {
         Ok(code) => std::process::ExitCode::from(code),
         Err(e) => {
-            eprintln!("supervisor: error: {e:#}");
+            output::message(&format!("supervisor: error: {e:#}"));
             std::process::ExitCode::from(1)
         }
     }
@@ -61,7 +67,8 @@ fn dispatch(cli: Cli, run_flags: &[String]) -> Result<u8> {
         Some(Command::Eval { qtables, episodes, out, transport, overwrite }) => {
             let stop = stop_on_ctrl_c()?;
             let defaults = cli::RunArgs { overwrite, ..cli.run };
-            commands::eval(&qtables, episodes, out, transport, &defaults, &stop).map(|()| 0)
+            let complete = commands::eval(&qtables, episodes, out, transport, &defaults, &stop)?;
+            Ok(if complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
         Some(Command::Generate { spec, out }) => commands::generate(&spec, &out).map(|()| 0),
         Some(Command::Reproduce { figure, out, episodes, trials, seed, transport, overwrite }) => {
@@ -74,10 +81,7 @@ fn dispatch(cli: Cli, run_flags: &[String]) -> Result<u8> {
             let config = config::RunConfig::resolve(&cli.run)?;
             let stop = stop_on_ctrl_c()?;
             let outcome = run::run_experiment(&config, &stop)?;
-            for note in &outcome.notes {
-                eprintln!("supervisor: {note}");
-            }
-            println!("{}", config.out.join("summary.json").display());
+            output::line(&config.out.join("summary.json").display().to_string())?;
             Ok(if outcome.complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
     }

@@ -21,18 +21,17 @@ pub struct Series {
 }
 
 impl Series {
-    /// A line with one value per iteration, thinned to at most 2001 points (the curves are
-    /// smoothed already, and it keeps the SVG small); the last value is always kept, so the
-    /// line reaches the end of the run.
-    pub fn from_values(label: String, values: &[f64]) -> Series {
-        let step = values.len().div_ceil(2000).max(1);
-        let mut points: Vec<(f64, f64)> =
-            values.iter().enumerate().step_by(step).map(|(x, &y)| (x as f64, y)).collect();
-        let last = values.len().saturating_sub(1);
+    /// A line through `points` (iteration, episode length), thinned to at most 2001 of them
+    /// (the curves are smoothed already, and it keeps the SVG small); the last point is
+    /// always kept, so the line reaches the end of the run.
+    pub fn from_points(label: String, points: &[(f64, f64)]) -> Series {
+        let step = points.len().div_ceil(2000).max(1);
+        let mut kept: Vec<(f64, f64)> = points.iter().copied().step_by(step).collect();
+        let last = points.len().saturating_sub(1);
         if !last.is_multiple_of(step) {
-            points.push((last as f64, values[last]));
+            kept.push(points[last]);
         }
-        Series { label, points }
+        Series { label, points: kept }
     }
 }
 
@@ -221,8 +220,9 @@ mod tests {
 
     #[test]
     fn episode_axis_labels_are_whole_numbers() {
-        let values: Vec<f64> = (0..=10_000).map(|e| 100.0 - e as f64 / 200.0).collect();
-        let series = [Series::from_values("UAV1".into(), &values)];
+        let points: Vec<(f64, f64)> =
+            (0..=10_000).map(|e| (e as f64, 100.0 - e as f64 / 200.0)).collect();
+        let series = [Series::from_points("UAV1".into(), &points)];
         let references = [
             Reference { label: "optimum".into(), value: 11.5, detail: None },
             Reference {
@@ -246,19 +246,20 @@ mod tests {
     #[test]
     fn thinned_lines_reach_the_last_episode() {
         for len in [1usize, 1999, 4000, 5001, 10_000] {
-            let values: Vec<f64> = (0..len).map(|e| e as f64).collect();
-            let series = Series::from_values("UAV1".into(), &values);
+            let points: Vec<(f64, f64)> = (0..len).map(|e| (e as f64, e as f64)).collect();
+            let series = Series::from_points("UAV1".into(), &points);
             assert!(series.points.len() <= 2001, "{len} values kept {}", series.points.len());
             assert_eq!(series.points.last(), Some(&((len - 1) as f64, (len - 1) as f64)));
         }
-        assert!(Series::from_values("none".into(), &[]).points.is_empty());
+        assert!(Series::from_points("none".into(), &[]).points.is_empty());
     }
 
     /// 100 ticks for the first 1000 episodes, then between 12 and 13.
     fn learned_by_episode_1000() -> Series {
-        let values: Vec<f64> =
-            (0..10_000).map(|e| if e < 1000 { 100.0 } else { 12.0 + (e % 2) as f64 }).collect();
-        Series::from_values("UAV1".into(), &values)
+        let points: Vec<(f64, f64)> = (0..10_000)
+            .map(|e| (e as f64, if e < 1000 { 100.0 } else { 12.0 + (e % 2) as f64 }))
+            .collect();
+        Series::from_points("UAV1".into(), &points)
     }
 
     #[test]
@@ -304,11 +305,11 @@ mod tests {
             // 5% above it is past f64::MAX.
             (1.75e308, "episode length 1.75e308 is too large to plot"),
         ] {
-            let series = [Series::from_values("UAV1".into(), &[40.0, value])];
+            let series = [Series::from_points("UAV1".into(), &[(0.0, 40.0), (1.0, value)])];
             let e = plot_curves(&path, "test", &series, &[]).unwrap_err().to_string();
             assert!(e.ends_with(expected), "{value}: {e}");
             let reference = [Reference { label: "optimum".into(), value, detail: None }];
-            let ok = [Series::from_values("UAV1".into(), &[40.0, 30.0])];
+            let ok = [Series::from_points("UAV1".into(), &[(0.0, 40.0), (1.0, 30.0)])];
             let e = plot_curves(&path, "test", &ok, &reference).unwrap_err().to_string();
             assert!(e.ends_with(expected), "reference {value}: {e}");
         }

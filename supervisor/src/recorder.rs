@@ -21,6 +21,9 @@ pub struct Recorder {
     /// Training episodes recorded since the bar last moved: it moves at each redraw, since
     /// a move reads the clock and records come by the thousand.
     unshown: u64,
+    /// What went wrong on the way (lost or restarted agents...), for `summary.json`. Kept
+    /// here rather than returned by the transport so that a run that fails keeps them too.
+    notes: Vec<String>,
 }
 
 impl Recorder {
@@ -48,14 +51,27 @@ impl Recorder {
             env_steps: 0,
             live: 0,
             unshown: 0,
+            notes: Vec::new(),
         }
     }
 
     /// Prints `line` on stderr above the progress bar, unless the run is quiet.
     pub fn say(&self, line: &str) {
         if !self.quiet {
-            self.bar.suspend(|| eprintln!("supervisor: {line}"));
+            self.bar.suspend(|| crate::output::message(&format!("supervisor: {line}")));
         }
+    }
+
+    /// Notes `note` in the summary and prints it on stderr as it happens, once, also when the
+    /// run is quiet (`--quiet` hides the progress, not what went wrong).
+    pub fn note(&mut self, note: String) {
+        self.bar.suspend(|| crate::output::message(&format!("supervisor: {note}")));
+        self.notes.push(note);
+    }
+
+    /// Everything [`Recorder::note`] noted, in order.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
@@ -80,12 +96,8 @@ impl Recorder {
         }
         self.last_draw = Instant::now();
         let recent = self.collector.train_lengths().first().map(|trials| {
-            let tail: Vec<u32> = trials
-                .iter()
-                .flat_map(|t| {
-                    t[t.len().saturating_sub(RECENT / trials.len().max(1))..].iter().copied()
-                })
-                .collect();
+            let tail: Vec<u32> =
+                trials.iter().flat_map(|t| t.last(RECENT / trials.len().max(1))).collect();
             tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
         });
         let ticks_per_s =

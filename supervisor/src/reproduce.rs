@@ -4,8 +4,10 @@
 //! optima as reference lines. Every run is an ordinary run with its own results directory.
 
 use crate::cli::{Figure, RunArgs};
+use crate::commands::episode_points;
 use crate::config::RunConfig;
 use crate::curve::read_smoothed;
+use crate::output;
 use crate::plot::{plot_curves, Reference, Series};
 use crate::run::run_experiment;
 use anyhow::{Context, Result};
@@ -47,16 +49,17 @@ pub fn reproduce(
         };
         let config = RunConfig::resolve(&args)?;
         let outcome = run_experiment(&config, stop)?;
-        eprintln!("{}: {}", label, config.out.display());
+        output::message(&format!("{}: {}", label, config.out.display()));
         if !outcome.complete {
             return Ok(false);
         }
-        curves.push((label, read_smoothed(&config.out.join("curve.csv"), 1)?));
+        let points = read_smoothed(&config.out.join("curve.csv"), 1)?;
+        curves.push((label, config.smoothing, points));
     }
     let references = references(figure)?;
     let series: Vec<Series> = curves
         .iter()
-        .map(|(label, values)| Series::from_values(label.to_string(), values))
+        .map(|(label, _, points)| Series::from_points(label.to_string(), &episode_points(points)))
         .collect();
     let path = out.join(format!("{name}.svg"));
     let title = match figure {
@@ -64,12 +67,18 @@ pub fn reproduce(
         Figure::Fig11 => "Fig. 11: learning without vs with communication (UAV1, mean of trials)",
     };
     plot_curves(&path, title, &series, &references)?;
-    for (label, values) in &curves {
-        let first = values.first().context("an empty curve")?;
-        let last = values.last().context("an empty curve")?;
-        println!("{label}: smoothed episode length {first:.1} -> {last:.1}");
+    for (label, window, points) in &curves {
+        // The first point whose trailing average spans a whole window: the points before
+        // average fewer episodes, down to episode 0 alone (about twice the window's mean).
+        let first =
+            points.get(window.min(&points.len()).saturating_sub(1)).context("an empty curve")?.1;
+        let last = points.last().context("an empty curve")?.1;
+        output::line(&format!(
+            "{label}: smoothed episode length {first:.1} (first full window of {window} \
+             episodes) -> {last:.1}"
+        ))?;
     }
-    println!("{}", path.display());
+    output::line(&path.display().to_string())?;
     Ok(true)
 }
 

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use flockstep_proto::{slots_in, EpisodeReport, Phase};
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const CSV_HEADER: &str = "trial,agent,episode,start_tick,length,truncated\n";
 
@@ -108,13 +108,102 @@ fn write_csv_line(csv: &mut impl Write, fields: [u64; 6]) -> std::io::Result<()>
 /// Greedy totals of one periodic block: (episodes, total length, truncated).
 type Totals = (u64, u64, u64);
 
+/// A CSV file the run streams into, with its path for the errors.
+#[derive(Debug)]
+struct Csv {
+    path: PathBuf,
+    file: BufWriter<File>,
+}
+
+impl Csv {
+    /// Creates `dir/name` holding the header line.
+    fn create(dir: &Path, name: &str) -> Result<Csv> {
+        let path = dir.join(name);
+        let file =
+            File::create(&path).with_context(|| format!("cannot write {}", path.display()))?;
+        let mut csv = Csv { path, file: BufWriter::new(file) };
+        csv.file.write_all(CSV_HEADER.as_bytes()).with_context(|| csv.cannot_write())?;
+        Ok(csv)
+    }
+
+    fn line(&mut self, fields: [u64; 6]) -> Result<()> {
+        write_csv_line(&mut self.file, fields).with_context(|| self.cannot_write())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        self.file.flush().with_context(|| self.cannot_write())
+    }
+
+    fn cannot_write(&self) -> String {
+        format!("cannot write {}", self.path.display())
+    }
+}
+
+/// One agent's training episode lengths in one trial, by the trial's episode numbers: an
+/// agent that attached flies from a later episode on, one that was restarted misses the
+/// episodes it was down. Kept as runs of consecutive episodes, 4 bytes an episode.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Flown {
+    /// (first episode, lengths of it and the episodes after it), in episode order.
+    runs: Vec<(u64, Vec<u32>)>,
+}
+
+impl Flown {
+    /// Adds episode `episode`, which comes after every episode added before.
+    pub fn push(&mut self, episode: u64, length: u32) {
+        match self.runs.last_mut() {
+            Some((first, lengths)) if *first + lengths.len() as u64 == episode => {
+                lengths.push(length)
+            }
+            _ => self.runs.push((episode, vec![length])),
+        }
+    }
+
+    /// The length of episode `episode`, if the agent flew it.
+    pub fn get(&self, episode: u64) -> Option<u32> {
+        let run = self.runs.partition_point(|(first, _)| *first <= episode).checked_sub(1)?;
+        let (first, lengths) = &self.runs[run];
+        lengths.get(usize::try_from(episode - first).ok()?).copied()
+    }
+
+    /// The episodes from the first flown to the last flown (empty if none).
+    pub fn span(&self) -> std::ops::Range<u64> {
+        match (self.runs.first(), self.runs.last()) {
+            (Some((first, _)), Some((last, lengths))) => *first..last + lengths.len() as u64,
+            _ => 0..0,
+        }
+    }
+
+    /// The lengths of the last `n` episodes flown (fewer if it flew fewer), oldest first.
+    pub fn last(&self, n: usize) -> Vec<u32> {
+        let mut tail: Vec<u32> = self
+            .runs
+            .iter()
+            .rev()
+            .flat_map(|(_, lengths)| lengths.iter().rev().copied())
+            .take(n)
+            .collect();
+        tail.reverse();
+        tail
+    }
+
+    /// Episodes flown.
+    pub fn len(&self) -> usize {
+        self.runs.iter().map(|(_, lengths)| lengths.len()).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.runs.is_empty()
+    }
+}
+
 /// Everything the run recorded.
 #[derive(Debug)]
 pub struct Collector {
-    episodes_csv: BufWriter<File>,
-    greedy_csv: BufWriter<File>,
-    /// Training lengths: `train[agent][trial][episode]`.
-    train: Vec<Vec<Vec<u32>>>,
+    episodes_csv: Csv,
+    greedy_csv: Csv,
+    /// Training lengths: `train[agent][trial]`.
+    train: Vec<Vec<Flown>>,
     train_truncated: Vec<u64>,
     /// Final greedy sums: `(episodes, total length, truncated)` per agent and trial.
     greedy: Vec<Vec<Totals>>,
@@ -131,17 +220,9 @@ pub struct Collector {
 
 impl Collector {
     pub fn create(dir: &Path, agents: usize, trials: usize, plan: EvalPlan) -> Result<Collector> {
-        let open = |name: &str| -> Result<BufWriter<File>> {
-            let path = dir.join(name);
-            let mut file = BufWriter::new(
-                File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
-            );
-            file.write_all(CSV_HEADER.as_bytes())?;
-            Ok(file)
-        };
         let mut collector = Collector {
-            episodes_csv: open("episodes.csv")?,
-            greedy_csv: open("greedy_episodes.csv")?,
+            episodes_csv: Csv::create(dir, "episodes.csv")?,
+            greedy_csv: Csv::create(dir, "greedy_episodes.csv")?,
             train: Vec::new(),
             train_truncated: Vec::new(),
             greedy: Vec::new(),
@@ -197,20 +278,17 @@ impl Collector {
                 Phase::Train => &mut self.episodes_csv,
                 Phase::Eval => &mut self.greedy_csv,
             };
-            write_csv_line(
-                csv,
-                [
-                    report.trial.into(),
-                    slot as u64 + 1,
-                    report.episode,
-                    report.start_tick,
-                    length.into(),
-                    truncated,
-                ],
-            )?;
+            csv.line([
+                report.trial.into(),
+                slot as u64 + 1,
+                report.episode,
+                report.start_tick,
+                length.into(),
+                truncated,
+            ])?;
             match phase {
                 Phase::Train => {
-                    self.train[slot][trial].push(length);
+                    self.train[slot][trial].push(report.episode, length);
                     self.train_truncated[slot] += truncated;
                 }
                 Phase::Eval => {
@@ -230,7 +308,7 @@ impl Collector {
     /// Makes room for `agents` agents: those the run starts with, and any that join later.
     fn grow(&mut self, agents: usize) {
         let trials = self.ticks.len();
-        self.train.resize(agents, vec![Vec::new(); trials]);
+        self.train.resize(agents, vec![Flown::default(); trials]);
         self.train_truncated.resize(agents, 0);
         self.greedy.resize(agents, vec![(0, 0, 0); trials]);
         self.periodic.resize(agents, vec![(0, 0, 0); self.plan.blocks as usize]);
@@ -238,12 +316,11 @@ impl Collector {
 
     pub fn flush(&mut self) -> Result<()> {
         self.episodes_csv.flush()?;
-        self.greedy_csv.flush()?;
-        Ok(())
+        self.greedy_csv.flush()
     }
 
-    /// `train[agent][trial]` lengths, in episode order.
-    pub fn train_lengths(&self) -> &[Vec<Vec<u32>>] {
+    /// `train[agent][trial]`: the training lengths of each agent in each trial.
+    pub fn train_lengths(&self) -> &[Vec<Flown>] {
         &self.train
     }
 
@@ -251,18 +328,17 @@ impl Collector {
         self.train_truncated.get(agent).copied().unwrap_or(0)
     }
 
-    /// Mean over trials of each trial's mean of its last `window` training episodes.
-    pub fn final_mean(&self, agent: usize, window: usize) -> Option<f64> {
-        let trials = self.train.get(agent)?;
-        let means: Vec<f64> = trials
-            .iter()
-            .filter(|t| !t.is_empty())
-            .map(|t| {
-                let tail = &t[t.len().saturating_sub(window)..];
-                tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len() as f64
-            })
-            .collect();
-        (!means.is_empty()).then(|| means.iter().sum::<f64>() / means.len() as f64)
+    /// The mean over trials of each trial's mean of `agent`'s last training episodes, and
+    /// how many episodes that is per trial: `window`, or fewer if a trial has fewer (the
+    /// same number in every trial, so that no trial weighs more than another). Trials the
+    /// agent flew no episode of (a run stopped at once) are left out.
+    pub fn final_mean(&self, agent: usize, window: usize) -> Option<(f64, usize)> {
+        let flown: Vec<&Flown> = self.train.get(agent)?.iter().filter(|t| !t.is_empty()).collect();
+        let window = flown.iter().map(|t| t.len()).min()?.min(window);
+        let trial_mean =
+            |t: &&Flown| t.last(window).iter().map(|&l| f64::from(l)).sum::<f64>() / window as f64;
+        let mean = flown.iter().map(trial_mean).sum::<f64>() / flown.len() as f64;
+        Some((mean, window))
     }
 
     /// The periodic greedy evaluations of `agent`: (training episodes behind the policy,
@@ -343,7 +419,47 @@ mod tests {
             error.contains("trial 1 reported Train episode 2 where episode 1 was due"),
             "{error}"
         );
-        assert_eq!(collector.train_lengths()[0][1], vec![13], "the bad report was not recorded");
+        assert_eq!(
+            collector.train_lengths()[0][1].last(9),
+            vec![13],
+            "the bad report was not recorded"
+        );
+    }
+
+    #[test]
+    fn an_agents_lengths_are_kept_by_episode_number_across_gaps() {
+        let mut flown = Flown::default();
+        assert_eq!((flown.span(), flown.len(), flown.get(0)), (0..0, 0, None));
+        for (episode, length) in [(3, 30), (4, 40), (7, 70), (8, 80)] {
+            flown.push(episode, length);
+        }
+        assert_eq!((flown.span(), flown.len()), (3..9, 4));
+        let lengths: Vec<Option<u32>> = (0..10).map(|e| flown.get(e)).collect();
+        let none = None;
+        assert_eq!(
+            lengths,
+            [none, none, none, Some(30), Some(40), none, none, Some(70), Some(80), none]
+        );
+        assert_eq!(flown.last(3), vec![40, 70, 80]);
+        assert_eq!(flown.last(9), vec![30, 40, 70, 80]);
+    }
+
+    /// `final_window` says how many episodes the final mean covers: every trial's last
+    /// `window`, or fewer in every trial if one has fewer; trials with none are left out.
+    #[test]
+    fn the_final_mean_covers_the_same_last_episodes_of_every_trial_that_has_any() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 3, EvalPlan::default()).unwrap();
+        for (trial, lengths) in [(0, &[10, 20, 30][..]), (1, &[4, 6][..])] {
+            for (episode, &length) in lengths.iter().enumerate() {
+                let mut r = report(trial, Phase::Train, episode as u64);
+                r.lengths[0] = length;
+                collector.record(&r).unwrap();
+            }
+        }
+        assert_eq!(collector.final_mean(0, 1000), Some(((25.0 + 5.0) / 2.0, 2)));
+        assert_eq!(collector.final_mean(0, 1), Some(((30.0 + 6.0) / 2.0, 1)));
+        assert_eq!(collector.final_mean(1, 1000), None, "no such agent");
     }
 
     /// Reports come from another process: numbers past `u64` are an error, not a panic.

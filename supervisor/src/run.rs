@@ -15,13 +15,12 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-/// How a run ended.
+/// How a run ended. What went wrong on the way but did not stop it (lost agents...) is in
+/// the recorder's notes ([`Recorder::note`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Outcome {
     /// Every trial ran its whole budget.
     pub complete: bool,
-    /// What went wrong on the way but did not stop the run (lost agents...).
-    pub notes: Vec<String>,
     /// Peak resident memory of each process of the run (name, KiB).
     pub peak_rss_kib: Vec<(String, u64)>,
 }
@@ -63,20 +62,24 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     let started = Instant::now();
     let result = match config.transport {
         Transport::Inproc => crate::inproc::run(config, &mut recorder, stop)
-            .map(|complete| Outcome { complete, notes: vec![], peak_rss_kib: vec![] }),
+            .map(|complete| Outcome { complete, peak_rss_kib: vec![] }),
         Transport::Shm => crate::shm::run(config, &mut recorder, stop),
     };
     let wall = started.elapsed().as_secs_f64();
-    recorder.finish()?;
-    // Whatever happened, what was collected is written before the error is reported.
-    let mut outcome = result.as_ref().map(Outcome::clone).unwrap_or_else(|e| Outcome {
-        complete: false,
-        notes: vec![format!("{e:#}")],
-        peak_rss_kib: vec![],
-    });
+    // Whatever happened, what was collected is written before the error is reported; the
+    // first error is the one reported (a full disk fails the run, then every write after).
+    let finished = recorder.finish();
+    let mut outcome = result
+        .as_ref()
+        .map(Outcome::clone)
+        .unwrap_or_else(|_| Outcome { complete: false, peak_rss_kib: vec![] });
     outcome.peak_rss_kib.insert(0, ("supervisor".to_string(), own_peak_rss_kib()));
-    write_results(config, &recorder, wall, &outcome)?;
-    result
+    let error = result.as_ref().err().map(|e| format!("{e:#}"));
+    let written = write_results(config, &recorder, wall, &outcome, error.as_deref());
+    let outcome = result?;
+    finished?;
+    written?;
+    Ok(outcome)
 }
 
 /// Creates the results directory (removing an earlier run's results there if asked to) and
@@ -135,11 +138,14 @@ fn copy_resumed_snapshots(config: &RunConfig, resume: &Path) -> Result<()> {
 /// Agents drawn on the curve plot (more lines would hide each other).
 const PLOTTED_AGENTS: usize = 8;
 
+/// Writes the curves, the plot and `summary.json`; `error` is what failed the run, if
+/// anything did (a note of the summary).
 fn write_results(
     config: &RunConfig,
     recorder: &Recorder,
     wall: f64,
     outcome: &Outcome,
+    error: Option<&str>,
 ) -> Result<()> {
     let collector = recorder.collector();
     let curves = curve::curves(collector.train_lengths(), config.smoothing);
@@ -150,9 +156,11 @@ fn write_results(
         .iter()
         .take(PLOTTED_AGENTS)
         .map(|c| {
-            Series::from_values(
+            let points: Vec<(f64, f64)> =
+                c.episodes.iter().zip(&c.smoothed).map(|(&e, &y)| (e as f64, y)).collect();
+            Series::from_points(
                 format!("UAV{} (mean of {} trials)", c.agent, config.trials),
-                &c.smoothed,
+                &points,
             )
         })
         .collect();
@@ -185,6 +193,6 @@ fn write_results(
         config.episodes.train_episodes
     );
     plot_curves(&config.out.join("curve.svg"), &title, &series, &references)?;
-    let value = summary::summary(config, recorder, wall, outcome);
+    let value = summary::summary(config, recorder, wall, outcome, error);
     summary::write(&config.out.join("summary.json"), &value)
 }

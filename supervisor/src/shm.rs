@@ -4,11 +4,14 @@
 //! the run's services), opens the run as a reader of episode records, starts the agents, and
 //! then records what the world reports until the world exits. It watches its children: a
 //! failed agent is reported (the world drops it from the barrier) and, with `--restart
-//! on-failure`, started again from its latest snapshot; a failed world ends the run at once.
-//! Ctrl-C asks the world to stop at the end of the current round. Every child is finally
-//! brought down by the shutdown ladder and what is left of the run in shared memory removed.
+//! on-failure`, started again from its latest snapshot; an agent the world dropped whose
+//! process still runs (hung) is brought down and is then a failed agent too; a failed world
+//! ends the run at once, and so does an agent that fails in the barrier as the run ends (its
+//! final Q-tables are lost). Ctrl-C asks the world to stop at the end of the current round.
+//! Every child is finally brought down by the shutdown ladder and what is left of the run in
+//! shared memory removed.
 
-use crate::children::{shut_down, Process};
+use crate::children::{shut_down, Process, TERM_GRACE};
 use crate::cli::Restart;
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
@@ -42,10 +45,18 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     if let Some(dir) = &config.trace_dir {
         create_trace_files(dir, config.uavs)?;
     }
-    let mut fleet =
-        Fleet { config, processes: Vec::new(), slots: Vec::new(), restarts: vec![0; config.uavs] };
+    let mut fleet = Fleet {
+        config,
+        processes: Vec::new(),
+        slots: Vec::new(),
+        seats: Vec::new(),
+        noted: Vec::new(),
+        restarts: vec![0; config.uavs],
+    };
     fleet.processes.push(Process::spawn("world", world_command(config)?, &logs.join("world.log"))?);
     fleet.slots.push(None);
+    fleet.seats.push(Seat::Waiting { free_seen: false });
+    fleet.noted.push(false);
     let result = open_ports(config, &mut fleet.processes[0]).and_then(|ports| {
         for slot in 0..config.uavs {
             fleet.spawn_agent(slot, false)?;
@@ -62,7 +73,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     outcome.peak_rss_kib =
         fleet.processes.iter().filter_map(|p| Some((p.name.clone(), p.peak_rss_kib?))).collect();
     if !forced.is_empty() {
-        outcome.notes.push(format!("had to signal {} to stop", forced.join(", ")));
+        recorder.note(format!("had to signal {} to stop", forced.join(", ")));
     }
     Ok(outcome)
 }
@@ -96,7 +107,44 @@ struct Fleet<'a> {
     processes: Vec<Process>,
     /// Per process: the agent slot it serves (None: the world).
     slots: Vec<Option<usize>>,
+    /// Per process: where it stands in the barrier, as the episode reports show it (the
+    /// world's stays `Waiting`).
+    seats: Vec<Seat>,
+    /// Per process: its failure has been noted.
+    noted: Vec<bool>,
     restarts: Vec<u32>,
+}
+
+/// Where an agent process stands in the barrier, as far as the supervisor can tell. The world
+/// says it only through the episode reports, whose `live` bit i is set while slot i is in the
+/// barrier: the slot turns free when the world drops its agent, and live again when the
+/// world admits one. That one need not be this process: reports that arrive after a restart
+/// may have been sent before the world dropped the predecessor, so a restart counts as
+/// admitted only once its slot has been seen free and then live. (An agent that attaches may
+/// also take the freed route first; the supervisor cannot tell it from its own restart, which
+/// then waits for the route, and would take it for admitted: a known limit.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Seat {
+    /// Not admitted yet. `free_seen`: its slot has been free since the process started (a
+    /// starting agent's slot is free before round 0, which no report precedes).
+    Waiting { free_seen: bool },
+    /// Admitted: its slot turned live while the process ran.
+    InBarrier,
+    /// Its slot turned free while it was in the barrier: the world dropped it.
+    Dropped,
+}
+
+impl Seat {
+    /// The seat after a report whose `live` bit for the process's slot is `live`; `exited`:
+    /// the process is known to have exited (then it cannot be the one admitted).
+    fn after(self, live: bool, exited: bool) -> Seat {
+        match self {
+            Seat::Waiting { .. } if !live => Seat::Waiting { free_seen: true },
+            Seat::Waiting { free_seen: true } if !exited => Seat::InBarrier,
+            Seat::InBarrier if !live => Seat::Dropped,
+            seat => seat,
+        }
+    }
 }
 
 impl Fleet<'_> {
@@ -112,11 +160,61 @@ impl Fleet<'_> {
         let command = agent_command(self.config, slot, restarted)?;
         self.processes.push(Process::spawn(&name, command, &log)?);
         self.slots.push(Some(slot));
+        self.seats.push(Seat::Waiting { free_seen: !restarted });
+        self.noted.push(false);
+        Ok(())
+    }
+
+    /// Records the episode reports the world has sent, and follows from their `live` bits
+    /// where each agent process stands in the barrier.
+    fn record_reports(&mut self, ports: &SupervisorPorts, recorder: &mut Recorder) -> Result<()> {
+        while let Some(report) = ports.try_episode()? {
+            recorder.record(&report)?;
+            for (i, slot) in self.slots.iter().enumerate() {
+                if let Some(slot) = slot {
+                    let live = report.live >> slot & 1 == 1;
+                    self.seats[i] = self.seats[i].after(live, self.processes[i].exited());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Brings down the agent processes the world dropped while they still run: it drops an
+    /// agent whose process is gone or that stayed silent past `--agent-timeout-ms`, so a
+    /// dropped process that runs is hung (SPEC 4: presumed dead). Once it has exited it is a
+    /// failed agent like any other, reported and, if asked, restarted. Those being brought
+    /// down are taken a step further (SIGKILL after SIGTERM's grace); new ones only while
+    /// the run goes on (`start`), not once it stops, when agents leave by themselves.
+    /// Returns whether any is still being brought down.
+    fn bring_down_dropped(&mut self, start: bool) -> Result<bool> {
+        let mut running = false;
+        for (process, seat) in self.processes.iter_mut().zip(&self.seats) {
+            let due = process.brought_down() || (start && *seat == Seat::Dropped);
+            if due && !process.exited() && process.status()?.is_none() {
+                process.bring_down();
+                running = true;
+            }
+        }
+        Ok(running)
+    }
+
+    /// Finishes bringing down the dropped agent processes (see [`Fleet::bring_down_dropped`])
+    /// once the world has exited: they would not leave by themselves, and the shutdown
+    /// ladder would first give them its grace. Bounded: SIGTERM's grace and a second for
+    /// SIGKILL to take effect, then they are left to the ladder.
+    fn finish_bringing_down(&mut self) -> Result<()> {
+        let deadline = Instant::now() + TERM_GRACE + Duration::from_secs(1);
+        while self.bring_down_dropped(false)? && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
         Ok(())
     }
 
     /// Records episode reports until the world exits; asks it to stop on Ctrl-C; reports
-    /// and, if asked, restarts failed agents.
+    /// and, if asked, restarts failed agents. A run that ends with an agent that failed while
+    /// in the barrier is an error: that agent's final Q-tables, written as the run ends, are
+    /// lost (an in-process run fails the same way).
     fn supervise(
         &mut self,
         ports: &SupervisorPorts,
@@ -125,26 +223,20 @@ impl Fleet<'_> {
     ) -> Result<Outcome> {
         // Everything told to the world so far; each message repeats it all.
         let mut control = Control::default();
-        let mut notes = Vec::new();
-        let mut reported = vec![false; self.processes.len()];
         // Named when the world fails: its "every agent is gone" says nothing of why.
         let mut first_failure: Option<String> = None;
         loop {
-            while let Some(report) = ports.try_episode()? {
-                recorder.record(&report)?;
-            }
+            self.record_reports(ports, recorder)?;
             recorder.redraw();
             if stop.load(Ordering::Relaxed) && control.stop == 0 {
                 control.stop = 1;
                 ports.send_control(&control)?;
             }
             if let Some(status) = self.processes[0].status()? {
-                while let Some(report) = ports.try_episode()? {
-                    recorder.record(&report)?;
-                }
+                self.record_reports(ports, recorder)?;
                 if !status.success() {
                     // An agent may have failed since the last look, and be why the world did.
-                    let late = self.newly_failed_agents(&mut reported)?;
+                    let late = self.newly_failed_agents()?;
                     let first = first_failure.or_else(|| late.first().map(|(_, n)| n.clone()));
                     let cause = first.map_or_else(String::new, |n| format!("; first to fail: {n}"));
                     bail!(
@@ -152,22 +244,35 @@ impl Fleet<'_> {
                         self.processes[0].last_words()
                     );
                 }
-                return Ok(Outcome { complete: control.stop == 0, notes, peak_rss_kib: vec![] });
+                self.finish_bringing_down()?;
+                for (_, note) in self.newly_failed_agents()? {
+                    recorder.note(format!("{note}; not restarted (the run has ended)"));
+                }
+                self.refuse_lost_tables()?;
+                return Ok(Outcome { complete: control.stop == 0, peak_rss_kib: vec![] });
             }
-            for (slot, note) in self.newly_failed_agents(&mut reported)? {
+            self.bring_down_dropped(control.stop == 0)?;
+            for (slot, note) in self.newly_failed_agents()? {
                 first_failure.get_or_insert_with(|| note.clone());
-                tracing::warn!("{note}; the run goes on without it");
-                notes.push(note);
-                if self.config.restart == Restart::OnFailure
+                let restart = self.config.restart == Restart::OnFailure
                     && control.stop == 0
-                    && self.restarts[slot] < MAX_RESTARTS
-                {
+                    && self.restarts[slot] < MAX_RESTARTS;
+                if restart {
+                    recorder.note(note);
                     self.restarts[slot] += 1;
                     // Before the new agent starts: these are the snapshots it reads.
                     let note = restart_note(self.config, slot);
                     self.spawn_agent(slot, true)?;
-                    notes.push(note);
+                    recorder.note(note);
                 } else {
+                    let why = if control.stop == 1 {
+                        "the run is stopping".to_string()
+                    } else if self.config.restart == Restart::Never {
+                        "--restart never".to_string()
+                    } else {
+                        format!("restarted {MAX_RESTARTS} times already")
+                    };
+                    recorder.note(format!("{note}; not restarted ({why})"));
                     control.gone |= 1 << slot;
                     ports.send_control(&control)?;
                 }
@@ -178,23 +283,55 @@ impl Fleet<'_> {
         }
     }
 
-    /// The agent processes that failed since the last call (`reported` marks those already
-    /// returned), with their slot and a note naming the process, its exit and last words.
-    fn newly_failed_agents(&mut self, reported: &mut Vec<bool>) -> Result<Vec<(usize, String)>> {
-        reported.resize(self.processes.len(), false);
+    /// The agent processes that failed since the last call, with their slot and a note
+    /// naming the process and how it ended: its exit and last words, or, for one brought
+    /// down because the world dropped it, that.
+    fn newly_failed_agents(&mut self) -> Result<Vec<(usize, String)>> {
         let mut failed = Vec::new();
         for (i, process) in self.processes.iter_mut().enumerate().skip(1) {
             let Some(status) = process.status()? else { continue };
-            if !status.success() && !reported[i] {
-                reported[i] = true;
-                let slot = self.slots[i].expect("agent processes serve a slot");
-                failed.push((
-                    slot,
-                    format!("{} failed ({status}): {}", process.name, process.last_words()),
-                ));
+            if (status.success() && !process.brought_down()) || self.noted[i] {
+                continue;
             }
+            self.noted[i] = true;
+            let slot = self.slots[i].expect("agent processes serve a slot");
+            let note = if process.brought_down() {
+                format!(
+                    "{} was dropped by the world: silent past the deadline (--agent-timeout-ms \
+                     {}); the supervisor stopped it ({status})",
+                    process.name, self.config.agent_timeout_ms
+                )
+            } else {
+                format!("{} failed ({status}): {}", process.name, process.last_words())
+            };
+            failed.push((slot, note));
         }
         Ok(failed)
+    }
+
+    /// Fails the run if an agent process failed while in the barrier as the run ended: it
+    /// writes its final Q-tables then, before its last answer, so those results are lost.
+    /// (The world drops an agent that fails earlier, and the reports say so.)
+    fn refuse_lost_tables(&mut self) -> Result<()> {
+        let mut lost = Vec::new();
+        for (process, seat) in self.processes.iter_mut().zip(&self.seats).skip(1) {
+            match process.status()? {
+                Some(status) if !status.success() && *seat == Seat::InBarrier => {
+                    lost.push(format!(
+                        "{} failed as the run ended ({status}): {}",
+                        process.name,
+                        process.last_words()
+                    ))
+                }
+                _ => {}
+            }
+        }
+        anyhow::ensure!(
+            lost.is_empty(),
+            "final Q-tables may not all be saved: {}",
+            lost.join("; ")
+        );
+        Ok(())
     }
 }
 
@@ -331,5 +468,42 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
                 world.last_words()
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Seat;
+
+    /// Where a process that starts at `seat` stands after reports whose `live` bit for its
+    /// slot is each of `lives` in turn, its process running.
+    fn after(seat: Seat, lives: &[bool]) -> Seat {
+        lives.iter().fold(seat, |seat, &live| seat.after(live, false))
+    }
+
+    #[test]
+    fn a_starting_agent_is_admitted_by_a_live_report_and_dropped_when_its_slot_turns_free() {
+        let start = Seat::Waiting { free_seen: true };
+        assert_eq!(after(start, &[true]), Seat::InBarrier);
+        assert_eq!(after(start, &[true, true, false]), Seat::Dropped);
+        assert_eq!(after(start, &[true, false, true]), Seat::Dropped, "a drop is for good");
+    }
+
+    /// Reports sent before the world dropped a restart's predecessor show the slot live:
+    /// they must not make the restart admitted, or the predecessor's drop would look like
+    /// the restart's and the fresh process would be brought down.
+    #[test]
+    fn a_restart_is_admitted_only_once_its_slot_was_free_and_then_live() {
+        let start = Seat::Waiting { free_seen: false };
+        assert_eq!(after(start, &[true, true]), start, "the predecessor's live slot");
+        assert_eq!(after(start, &[true, false, false]), Seat::Waiting { free_seen: true });
+        assert_eq!(after(start, &[true, false, true]), Seat::InBarrier);
+        assert_eq!(after(start, &[true, false, true, false]), Seat::Dropped);
+    }
+
+    #[test]
+    fn a_process_that_has_exited_is_never_admitted() {
+        let free = Seat::Waiting { free_seen: true };
+        assert_eq!(free.after(true, true), free, "another agent took the route");
     }
 }

@@ -5,6 +5,7 @@
 
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
+use crate::results::Flown;
 use crate::run::Outcome;
 use anyhow::{Context, Result};
 use flockstep_world::optimum::{optimum, optimum_with_known_target};
@@ -15,33 +16,46 @@ use std::path::Path;
 /// a test keeps the two in step.
 const ICEORYX2_VERSION: &str = "0.10";
 
-/// Window of `final_mean_episode_length`: UAV1's last 1000 training episodes per trial.
+/// Window of `final_mean_episode_length`: UAV1's last 1000 training episodes per trial
+/// (fewer if it flew fewer; `final_window` says how many).
 pub const FINAL_WINDOW: usize = 1000;
 
+/// The summary of a run; `error` is what failed it, if anything did (the last note).
 pub fn summary(
     config: &RunConfig,
     recorder: &Recorder,
     wall_seconds: f64,
     outcome: &Outcome,
+    error: Option<&str>,
 ) -> Value {
     let collector = recorder.collector();
     let agents = collector.agents();
     let greedy: Vec<_> = (0..agents).map(|a| collector.greedy(a)).collect();
     let ticks = collector.ticks();
     let per_second = |n: u64| if wall_seconds > 0.0 { n as f64 / wall_seconds } else { 0.0 };
-    let final_means: Vec<_> = (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect();
+    let finals: Vec<_> = (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect();
+    let final_means: Vec<_> = finals.iter().map(|f| f.map(|(mean, _)| mean)).collect();
+    let final_windows: Vec<_> = finals.iter().map(|f| f.map(|(_, window)| window)).collect();
+    let mut notes = recorder.notes().to_vec();
+    notes.extend(error.map(str::to_string));
+    // Absolute, so that the record still leads to the snapshots from another directory.
+    let resume = config
+        .resume
+        .as_ref()
+        .map(|dir| dir.canonicalize().unwrap_or_else(|_| dir.clone()).display().to_string());
     json!({
         "flockstep_version": env!("CARGO_PKG_VERSION"),
         "iceoryx2_version": ICEORYX2_VERSION,
         "run_id": config.run_id,
         "transport": format!("{:?}", config.transport).to_lowercase(),
         "complete": outcome.complete,
-        "notes": outcome.notes,
+        "notes": notes,
         "peak_rss_kib": outcome.peak_rss_kib.iter().map(|(name, kib)| json!({ "process": name, "kib": kib })).collect::<Vec<_>>(),
         "scenario": config.scenario_arg,
         "scenario_name": config.scenario.name(),
         "seed": config.seed,
         "uavs": config.uavs,
+        "agents": agents_that_flew(config, recorder),
         "trials": config.trials,
         "episodes": config.episodes.train_episodes,
         "eval_episodes": config.episodes.eval_episodes,
@@ -53,6 +67,7 @@ pub fn summary(
         "tree": config.tree_text(),
         "tree_file": config.bt_path.as_ref().map(|p| p.display().to_string()),
         "smoothing_window": config.smoothing,
+        "resume": resume,
         "ticks": ticks,
         "rounds": collector.rounds(),
         "env_steps": recorder.env_steps(),
@@ -60,7 +75,8 @@ pub fn summary(
         "ticks_per_second": per_second(ticks),
         "rounds_per_second": per_second(collector.rounds()),
         "env_steps_per_second": per_second(recorder.env_steps()),
-        "final_window": FINAL_WINDOW,
+        "final_window": final_windows.first().copied().flatten(),
+        "final_window_per_agent": final_windows,
         "final_mean_episode_length": final_means.first().copied().flatten(),
         "final_mean_episode_length_per_agent": final_means,
         "train_truncated": (0..agents).map(|a| collector.train_truncated(a)).collect::<Vec<_>>(),
@@ -71,6 +87,30 @@ pub fn summary(
         "optimum_memoryless": (0..agents).map(|a| optimum(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
         "optimum_known_target": (0..agents).map(|a| optimum_with_known_target(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
     })
+}
+
+/// Every agent that flew a training episode: its number, whether it attached to the run (on
+/// a route the supervisor started no agent for) and, per trial, the first episode it flew
+/// and how many it flew. The curves and per-agent results are read against these: an
+/// attached agent's start late, and `uavs` counts only the agents the run started.
+fn agents_that_flew(config: &RunConfig, recorder: &Recorder) -> Vec<Value> {
+    let lengths = recorder.collector().train_lengths();
+    lengths
+        .iter()
+        .enumerate()
+        .filter(|(_, trials)| trials.iter().any(|t| !t.is_empty()))
+        .map(|(slot, trials)| {
+            let first: Vec<_> =
+                trials.iter().map(|t| (!t.is_empty()).then(|| t.span().start)).collect();
+            let flown: Vec<_> = trials.iter().map(Flown::len).collect();
+            json!({
+                "uav": slot + 1,
+                "attached": slot >= config.uavs,
+                "first_episode_per_trial": first,
+                "episodes_per_trial": flown,
+            })
+        })
+        .collect()
 }
 
 pub fn write(path: &Path, value: &Value) -> Result<()> {

@@ -7,9 +7,10 @@
 
 use crate::harness::{
     assert_nothing_left, error_line, first_difference, read, run_fail, run_id, run_ok, scratch,
-    words, SUPERVISOR,
+    wait_until, words, SUPERVISOR,
 };
 use flockstep_supervisor::results::RUN_OUTPUTS;
+use std::time::Duration;
 
 /// Runs the supervisor with `args` on both transports (10 episodes unless `args` give
 /// `--episodes`), results into `out`; `check` looks at the error line. Nothing of the run
@@ -194,20 +195,137 @@ fn episode_counts_past_what_a_run_can_count_or_keep() {
     );
 }
 
-/// `eval` takes its settings from the run's `summary.json`: a number there that does not fit
-/// is named with its file and field, not cut short.
+/// `eval` takes its settings from the run's `summary.json`: a value there that does not fit
+/// is named with its file and field, not cut short, and not as the command-line flag it
+/// stands for (`--trials 0 is out of range`, which the user never typed).
 #[test]
-fn eval_refuses_a_summary_number_out_of_range() {
+fn eval_refuses_a_summary_value_out_of_range_naming_the_file_and_field() {
     let dir = scratch();
     for file in ["scenario.map", "tree.bt"] {
         std::fs::write(dir.path().join(file), b"").expect("write a file");
     }
-    let summary = r#"{"uavs": 1, "trials": 1, "seed": 1, "tick_cap": 4294967296, "comm": "none"}"#;
-    std::fs::write(dir.path().join("summary.json"), summary).expect("write summary.json");
     let qtables = dir.path().display().to_string();
+    let summary_json = format!("{qtables}/summary.json");
+    for (fields, expected) in [
+        (
+            r#""uavs": 1, "trials": 1, "tick_cap": 4294967296, "comm": "none""#,
+            "`tick_cap` 4294967296 is out of range 1..=4294967295",
+        ),
+        (
+            r#""uavs": 1, "trials": 0, "tick_cap": 100, "comm": "none""#,
+            "`trials` 0 is out of range 1..=",
+        ),
+        (
+            r#""uavs": 0, "trials": 1, "tick_cap": 100, "comm": "none""#,
+            "`uavs` 0 is out of range 1..=",
+        ),
+        (
+            r#""uavs": 1, "trials": 1, "tick_cap": 0, "comm": "none""#,
+            "`tick_cap` 0 is out of range",
+        ),
+        (
+            r#""uavs": 1, "trials": 1, "tick_cap": 100, "comm": "loud""#,
+            "`comm` \"loud\" is none of none, flags, compact",
+        ),
+        (r#""trials": 1, "tick_cap": 100, "comm": "none""#, "no whole number `uavs`"),
+    ] {
+        let summary = format!(r#"{{"seed": 1, {fields}}}"#);
+        std::fs::write(dir.path().join("summary.json"), summary).expect("write summary.json");
+        let line = error_line(&["eval", "--qtables", &qtables]);
+        assert!(line.contains(&format!("{summary_json}: {expected}")), "{line}");
+    }
+    // More agents than the run's map has routes: named in the summary, beside the map.
+    let s1 = crate::harness::repo_file("world/maps/s1_one_uav_one_target.map");
+    std::fs::copy(s1, dir.path().join("scenario.map")).expect("copy a map");
+    let summary = r#"{"uavs": 2, "trials": 1, "seed": 1, "tick_cap": 100, "comm": "none"}"#;
+    std::fs::write(dir.path().join("summary.json"), summary).expect("write summary.json");
     let line = error_line(&["eval", "--qtables", &qtables]);
-    let expected = format!("{qtables}/summary.json: `tick_cap` 4294967296 is out of range");
+    let expected = format!("{summary_json}: `uavs` 2, but its scenario.map has 1 route(s)");
     assert!(line.ends_with(&expected), "{line}");
+}
+
+/// Flags that watch or shape agent processes are refused by an in-process run, which has
+/// none, as other ignored flags are (a bad value is named as such first: see
+/// `settings_that_would_make_a_run_meaningless`).
+#[test]
+fn an_in_process_run_refuses_the_flags_of_agent_processes() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let (out_arg, traces) = (out.display().to_string(), dir.path().join("t").display().to_string());
+    for (flag, value) in [
+        ("--restart", "on-failure"),
+        ("--snapshot-every", "100"),
+        ("--agent-timeout-ms", "900"),
+        ("--fault", "1=crash-at-round=5"),
+        ("--trace-dir", &traces),
+    ] {
+        let args = [flag, value, "--transport", "inproc", "--out", &out_arg, "--episodes", "10"];
+        let line = error_line(&args);
+        assert!(
+            line.contains(&format!("{flag} applies to agent processes"))
+                && line.contains("(--transport inproc)"),
+            "{line}"
+        );
+        assert!(!out.join("episodes.csv").exists(), "{flag}: the run started");
+    }
+}
+
+/// `plot` draws SVG only: a file named for another format used to get SVG and exit 0.
+#[test]
+fn plot_refuses_a_file_name_for_another_format_than_svg() {
+    let dir = scratch();
+    let curve = dir.path().join("curve.csv");
+    let text = "episode,agent,mean_length,smoothed_length\n0,1,40,40\n1,1,30,35\n";
+    std::fs::write(&curve, text).expect("write curve.csv");
+    let spec = format!("{}=a run", curve.display());
+    for name in ["both.png", "both", "both.svg.pdf"] {
+        let out = dir.path().join(name);
+        let line = error_line(&["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+        assert!(line.contains("plots are written as SVG only") && line.contains(name), "{line}");
+        assert!(!out.exists(), "{name} was written");
+    }
+    let out = dir.path().join("both.svg");
+    run_ok(SUPERVISOR, &["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+    assert!(read(&out).starts_with(b"<svg"), "not an SVG");
+}
+
+/// Output that cannot be written used to panic (status 101 and a backtrace): stdout closed by
+/// its reader (`supervisor optimum | head -2`) ends quietly with the command's status, a
+/// full stdout is one error line, and a stderr that cannot be written is ignored.
+#[test]
+fn output_that_cannot_be_written_never_panics() {
+    let dir = scratch();
+    let stderr_file = dir.path().join("stderr");
+    let run = |args: &[&str], stdout: std::process::Stdio, stderr: std::process::Stdio| {
+        let mut child = std::process::Command::new(SUPERVISOR)
+            .args(args)
+            .stdout(stdout)
+            .stderr(stderr)
+            .spawn()
+            .expect("start the supervisor");
+        let mut status = None;
+        wait_until("the supervisor to exit", Duration::from_secs(60), || {
+            status = child.try_wait().expect("wait on the supervisor");
+            status.is_some()
+        });
+        status.expect("exited")
+    };
+    let stderr = || std::fs::File::create(&stderr_file).expect("a stderr file").into();
+    let full = || std::fs::File::create("/dev/full").expect("/dev/full").into();
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let status = run(&["optimum", "--scenario", "s4"], writer.into(), stderr());
+    let said = String::from_utf8_lossy(&read(&stderr_file)).into_owned();
+    assert_eq!((status.code(), said.as_str()), (Some(0), ""), "stdout closed by its reader");
+    let status = run(&["optimum", "--scenario", "s4"], full(), stderr());
+    let said = String::from_utf8_lossy(&read(&stderr_file)).into_owned();
+    assert_eq!(status.code(), Some(1), "stdout full: {said}");
+    assert_eq!(
+        said,
+        "supervisor: error: cannot write to stdout: No space left on device (os error 28)\n"
+    );
+    let status = run(&["--uavs", "0"], std::process::Stdio::null(), full());
+    assert_eq!(status.code(), Some(1), "stderr full, on an error");
 }
 
 /// `plot` reads `curve.csv` files it did not write: `inf`, `NaN` or `1e400` there used to

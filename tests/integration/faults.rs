@@ -111,6 +111,26 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
         let (head, tail) = (mean(&third[..100]), mean(&third[third.len() - 100..]));
         assert!(tail < head, "trial {trial}: UAV3 did not learn ({head} -> {tail})");
     }
+    // Its curve is placed at the trials' episode numbers: from the first episode every
+    // trial has for it (it used to start at 0), to the last.
+    let first_in_every_trial = (0..2)
+        .map(|trial| rows.iter().find(|r| r[0] == trial && r[1] == 3).expect("a UAV3 row")[2])
+        .max()
+        .expect("two trials");
+    let curve = String::from_utf8(read(&dir.path().join("curve.csv"))).expect("UTF-8");
+    let episodes: Vec<u64> = curve
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(1) == Some("3"))
+        .map(|l| l.split(',').next().and_then(|e| e.parse().ok()).expect("an episode number"))
+        .collect();
+    assert_eq!(episodes.first(), Some(&first_in_every_trial), "UAV3's curve starts elsewhere");
+    assert_eq!(episodes.last(), Some(&5999), "UAV3's curve ends elsewhere");
+    // The summary names the agent that attached.
+    let agents = summary(dir.path())["agents"].clone();
+    assert_eq!(agents[2]["uav"], 3, "{agents:#}");
+    assert_eq!(agents[2]["attached"], true, "{agents:#}");
+    assert_eq!(agents[0]["attached"], false, "{agents:#}");
     // Its peers hear it: UAV1's communication state gains entries for route 3, which sit
     // after UAV2's 5 entries (bits 10..20 of the first word).
     let trace = String::from_utf8(read(&traces.join("uav1.trace.csv"))).expect("UTF-8");
@@ -456,8 +476,11 @@ fn a_stray_join_for_a_starting_slot_does_not_take_it() {
     assert_nothing_left(&id);
 }
 
+/// A hung agent (its process runs, it answers nothing) is dropped by the world at the
+/// deadline; the supervisor sees it leave the barrier while its process runs, brings it down
+/// at once (this one ignores SIGTERM: SIGKILL after 2 s) and reports it as failed.
 #[test]
-fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
+fn a_hung_agent_is_dropped_at_the_deadline_and_brought_down_by_the_supervisor() {
     let dir = scratch();
     let (id, out) = (run_id("hang"), dir.path().display().to_string());
     let run = Spawned::supervisor(&run_args(
@@ -469,12 +492,57 @@ fn a_hung_agent_is_dropped_at_the_deadline_and_killed_by_the_ladder() {
     assert!(status.status.success(), "{report}");
     let log = world_log(dir.path());
     assert!(log.contains("silent past the deadline") && log.contains("uav=2"), "{log}");
-    let notes = summary(dir.path())["notes"].to_string();
+    let s = summary(dir.path());
+    let notes = s["notes"].to_string();
     assert!(
-        notes.contains("had to signal UAV2"),
-        "the ladder did not have to kill the hung agent: {notes}"
+        notes.contains("UAV2 was dropped by the world: silent past the deadline")
+            && notes.contains("SIGKILL")
+            && notes.contains("not restarted"),
+        "the hung agent is not reported as brought down: {notes}"
     );
+    assert!(!notes.contains("had to signal"), "left to the ladder at the end: {notes}");
+    assert_eq!(s["complete"], true, "{s:#}");
     assert_eq!(episode_rows(dir.path()).iter().filter(|r| r[1] == 1).count(), 2000);
+    assert_nothing_left(&id);
+}
+
+/// SPEC 4: an agent silent past the bound is presumed dead, reported and, if asked,
+/// restarted. Before, the supervisor said nothing of the hung agent the world had dropped,
+/// never restarted it, and only the ladder ended it after the run.
+#[test]
+fn a_hung_agent_is_reported_and_restarted() {
+    let dir = scratch();
+    let (id, out) = (run_id("hang-restart"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 3000 --trials 2 --seed 96 --fault 2=hang-at-round=5000 --restart on-failure --snapshot-every 20"),
+    ));
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], true, "{s:#}");
+    let notes: Vec<&str> =
+        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    assert_eq!(notes.len(), 2, "one drop, one restart: {notes:?}");
+    assert!(
+        notes[0].starts_with("UAV2 was dropped by the world: silent past the deadline"),
+        "{notes:?}"
+    );
+    assert!(notes[1].starts_with("UAV2 restarted from its latest snapshot"), "{notes:?}");
+    // Reported once, as it happened (it used to be printed twice).
+    let stderr = String::from_utf8_lossy(&status.stderr);
+    assert_eq!(stderr.matches("UAV2 was dropped by the world").count(), 1, "{report}");
+    // The restarted agent flew again after the gap where UAV2 was down.
+    let uav2: Vec<[u64; 6]> =
+        episode_rows(dir.path()).into_iter().filter(|r| r[0] == 0 && r[1] == 2).collect();
+    let gap =
+        uav2.windows(2).position(|w| w[1][2] != w[0][2] + 1).expect("a gap in UAV2's episodes");
+    assert!(
+        uav2.len() - gap > 100,
+        "UAV2 flew only {} episodes after its restart",
+        uav2.len() - gap
+    );
     assert_nothing_left(&id);
 }
 

@@ -2,10 +2,11 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    assert_nothing_left, episode_rows, error_line, number, run_id, run_ok, scratch, summary,
-    supervise, words, SUPERVISOR,
+    assert_nothing_left, catches, episode_rows, error_line, number, run_fail, run_id, run_ok,
+    scratch, signal, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
+use std::time::Duration;
 
 #[test]
 fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
@@ -74,9 +75,12 @@ fn resume_continues_from_the_learned_level() {
     let second = scratch();
     let resume = first.path().display().to_string();
     let continued = words("--transport inproc --scenario s2 --uavs 1 --episodes 200 --seed 6");
-    supervise(second.path(), &[&continued[..], &["--resume", &resume]].concat());
+    let resumed_run = supervise(second.path(), &[&continued[..], &["--resume", &resume]].concat());
+    // The summary records what the run resumed from, as the absolute directory.
+    let absolute = first.path().canonicalize().expect("the first run's directory");
+    assert_eq!(resumed_run["resume"], absolute.display().to_string(), "{resumed_run:#}");
     let fresh = scratch();
-    supervise(fresh.path(), &continued);
+    assert_eq!(supervise(fresh.path(), &continued)["resume"], serde_json::Value::Null);
     let mean = |dir: &std::path::Path| {
         let rows = episode_rows(dir);
         rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64
@@ -167,4 +171,61 @@ fn a_snapshot_that_does_not_fit_the_run_is_refused_in_one_line_before_it_starts(
     refused(&args, &out, &expected);
     std::fs::remove_file(dir.path().join("tree.bt")).unwrap();
     refused(&args, &out, &["error: eval --qtables", "no tree.bt"]);
+}
+
+/// Agents that cannot write their final Q-tables lose results: the run ends with an error
+/// naming the file and status 1 on both transports, everything else written (over shared
+/// memory it used to exit 0 with `"complete": true`, in-process 1). Here `qtables` is a file.
+#[test]
+fn a_run_whose_final_q_tables_cannot_be_written_fails_naming_the_file() {
+    for transport in ["inproc", "shm"] {
+        let dir = scratch();
+        std::fs::write(dir.path().join("qtables"), b"not a directory").expect("write a file");
+        let (out, id) = (dir.path().display().to_string(), run_id("unsaved"));
+        let args = words("--scenario s3 --uavs 2 --trials 2 --episodes 300 --quiet");
+        let rest = ["--transport", transport, "--out", &out, "--run-id", &id];
+        let (printed, report) = run_fail(SUPERVISOR, &[&args[..], &rest].concat());
+        assert_eq!(printed.status.code(), Some(1), "{transport}: {report}");
+        let stderr = String::from_utf8_lossy(&printed.stderr);
+        let error = stderr.lines().last().unwrap_or_default();
+        let file = dir.path().join("qtables").join("uav1_trial0.bin");
+        assert!(
+            error.starts_with("supervisor: error: final Q-tables")
+                && error.contains(&format!("cannot write {}", file.display())),
+            "{transport}: {report}"
+        );
+        let s = summary(dir.path());
+        assert_eq!(s["complete"], false, "{transport}: {s:#}");
+        let notes = s["notes"].as_array().expect("notes");
+        let last = notes.last().and_then(|n| n.as_str()).unwrap_or_default();
+        assert!(error.ends_with(last), "{transport}: the error is not the last note: {s:#}");
+        assert_eq!(episode_rows(dir.path()).len(), 2 * 2 * 300, "{transport}: episodes lost");
+        assert!(dir.path().join("curve.csv").exists(), "{transport}: no curve.csv");
+        assert_nothing_left(&id);
+    }
+}
+
+/// Ctrl-C during `eval` stops it as it stops a run: what was evaluated is printed and
+/// written, flagged `"complete": false`, and the status is 130 (it used to be 1).
+#[test]
+fn an_evaluation_stopped_by_ctrl_c_exits_130_with_partial_results() {
+    let dir = scratch();
+    supervise(
+        dir.path(),
+        &words("--transport inproc --scenario s1 --uavs 1 --trials 1 --episodes 200"),
+    );
+    let qtables = dir.path().display().to_string();
+    let eval = Spawned::supervisor(&["eval", "--qtables", &qtables, "--episodes", "100000000"]);
+    let greedy = dir.path().join("eval").join("greedy_episodes.csv");
+    wait_until("greedy episodes to be recorded", Duration::from_secs(60), || {
+        catches(eval.pid(), libc::SIGINT)
+            && std::fs::metadata(&greedy).is_ok_and(|m| m.len() > 1000)
+    });
+    signal(eval.pid(), libc::SIGINT);
+    let (printed, report) = eval.finish(Duration::from_secs(120));
+    assert_eq!(printed.status.code(), Some(130), "{report}");
+    let stdout = String::from_utf8_lossy(&printed.stdout);
+    assert!(stdout.starts_with("UAV1 greedy episode length "), "{report}");
+    assert!(String::from_utf8_lossy(&printed.stderr).contains("stopped early"), "{report}");
+    assert_eq!(summary(&dir.path().join("eval"))["complete"], false);
 }
