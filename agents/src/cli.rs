@@ -70,7 +70,7 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("agent: error: {e:#}");
+            flockstep_proto::output::message(&format!("agent: error: {e:#}"));
             std::process::ExitCode::FAILURE
         }
     }
@@ -82,8 +82,7 @@ fn read(path: &PathBuf) -> Result<String> {
 
 fn show(path: &PathBuf) -> Result<()> {
     let tree = parse_tree(&path.display().to_string(), &read(path)?, &OpenCatalog::default())?;
-    print!("{}", render_ascii(&tree));
-    Ok(())
+    Ok(flockstep_proto::output::text(&render_ascii(&tree))?)
 }
 
 fn replay_files(tree_path: &PathBuf, script_path: &PathBuf, seed: u64) -> Result<()> {
@@ -92,6 +91,5 @@ fn replay_files(tree_path: &PathBuf, script_path: &PathBuf, seed: u64) -> Result
     let report =
         replay(&tree, &catalog, &script_path.display().to_string(), &read(script_path)?, seed)
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-    print!("{report}");
-    Ok(())
+    Ok(flockstep_proto::output::text(&report.to_string())?)
 }

@@ -62,6 +62,12 @@ pub enum SnapshotError {
 }
 
 impl Snapshot {
+    /// The bytes of this snapshot as a file holds them (what [`Snapshot::decode`] reads).
+    pub fn encode(&self) -> Vec<u8> {
+        bincode::serde::encode_to_vec(self, bincode::config::standard())
+            .expect("a snapshot holds only plain data")
+    }
+
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
         let (snapshot, _): (Snapshot, usize) =
             bincode::serde::decode_from_slice(bytes, bincode::config::standard())

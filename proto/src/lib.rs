@@ -14,6 +14,7 @@ pub mod agent_to_world;
 pub mod flags;
 pub mod limits;
 pub mod logging;
+pub mod output;
 pub mod pose;
 mod prefetch;
 pub mod seed;

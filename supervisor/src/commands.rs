@@ -1,33 +1,22 @@
 //! The supervisor's helper subcommands: `optimum`, `eval`, `generate` and `plot`.
 
 use crate::curve::read_smoothed;
-use crate::output;
 use crate::plot::{plot_curves, Series};
 use anyhow::{Context, Result};
 use flockstep_agents::comm::CommMode;
+use flockstep_proto::output;
 use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
-use flockstep_world::optimum::{optimum as memoryless_optimum, optimum_with_known_target};
+use flockstep_world::optimum::route_optima;
 use flockstep_world::scenario::Scenario;
 use std::path::Path;
 
 /// Prints the exact optimal expected episode length of each route flown alone, and the
-/// optimal path.
+/// optimal path. A route without an optimum (it cannot see some target) says why, and the
+/// others' numbers are printed still: that is a fact about the map, not a failure.
 pub fn optimum(spec: &str) -> Result<()> {
     let scenario = Scenario::resolve(spec).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
-    for uav in 0..scenario.n_routes() {
-        let best = memoryless_optimum(&scenario, uav)
-            .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
-        let known = optimum_with_known_target(&scenario, uav)
-            .map_err(|e| anyhow::anyhow!("UAV{}: {e}", uav + 1))?;
-        output::line(&format!(
-            "{} UAV{}: memoryless optimum {:.4} ticks (per target {:?}); knowing the target {:.4}",
-            scenario.name(),
-            uav + 1,
-            best.expected_ticks,
-            best.lengths,
-            known.expected_ticks
-        ))?;
-        output::line(&best.to_string())?;
+    for route in route_optima(&scenario) {
+        output::line(&format!("{} {route}", scenario.name()))?;
     }
     Ok(())
 }
@@ -65,7 +54,7 @@ pub fn generate(spec: &str, out: &Path) -> Result<()> {
     let text =
         flockstep_world::generate::generate_text(spec).map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
-    output::line(&out.display().to_string())
+    Ok(output::line(&out.display().to_string())?)
 }
 
 /// Evaluates the snapshots of the run in `dir` greedily: the same scenario (its

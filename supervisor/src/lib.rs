@@ -10,7 +10,6 @@ pub mod cli;
 pub mod config;
 pub mod curve;
 pub mod inproc;
-pub mod output;
 pub mod plot;
 pub mod recorder;
 pub mod reproduce;
@@ -21,6 +20,7 @@ pub mod summary;
 
 use anyhow::Result;
 use cli::{Cli, Command};
+use flockstep_proto::output;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 

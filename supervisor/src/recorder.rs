@@ -58,14 +58,14 @@ impl Recorder {
     /// Prints `line` on stderr above the progress bar, unless the run is quiet.
     pub fn say(&self, line: &str) {
         if !self.quiet {
-            self.bar.suspend(|| crate::output::message(&format!("supervisor: {line}")));
+            self.bar.suspend(|| flockstep_proto::output::message(&format!("supervisor: {line}")));
         }
     }
 
     /// Notes `note` in the summary and prints it on stderr as it happens, once, also when the
     /// run is quiet (`--quiet` hides the progress, not what went wrong).
     pub fn note(&mut self, note: String) {
-        self.bar.suspend(|| crate::output::message(&format!("supervisor: {note}")));
+        self.bar.suspend(|| flockstep_proto::output::message(&format!("supervisor: {note}")));
         self.notes.push(note);
     }
 

@@ -123,8 +123,7 @@ fn copy_resumed_snapshots(config: &RunConfig, resume: &Path) -> Result<()> {
                 .with_context(|| {
                     format!("--resume {}: no snapshot {}", resume.display(), from.display())
                 })?;
-            let bytes = bincode::serde::encode_to_vec(&snapshot, bincode::config::standard())
-                .with_context(|| format!("cannot encode {}", from.display()))?;
+            let bytes = snapshot.encode();
             if let Some(dir) = to.parent() {
                 std::fs::create_dir_all(dir)
                     .with_context(|| format!("cannot create {}", dir.display()))?;

@@ -40,6 +40,9 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     if !swept.runs_cleaned.is_empty() {
         tracing::info!(runs = ?swept.runs_cleaned, "removed stale resources of dead runs");
     }
+    for (run, why) in &swept.failed {
+        tracing::warn!("left the files of run `{run}` in place, they cannot be removed: {why}");
+    }
     let logs = config.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
     if let Some(dir) = &config.trace_dir {

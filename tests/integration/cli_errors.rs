@@ -433,3 +433,16 @@ fn run_flags_typed_after_a_subcommand_say_where_they_belong() {
 fn as_strs(args: &[String]) -> Vec<&str> {
     args.iter().map(String::as_str).collect()
 }
+
+/// A route that cannot see some target has no optimum: `optimum` says why for that route,
+/// once and naming it once, and still prints the other route's numbers.
+#[test]
+fn optimum_names_a_route_without_one_and_prints_the_others() {
+    let out = run_ok(SUPERVISOR, &["optimum", "--scenario", "gen:uavs=2,targets=3,cover=1,seed=2"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let header = |uav: &str| stdout.lines().filter(|l| l.contains(uav)).count();
+    assert!(stdout.contains(" UAV1 sees T2 from no pose of its route"), "{stdout}");
+    assert!(!stdout.contains("UAV1: UAV1"), "{stdout}");
+    assert!(stdout.contains(" UAV2: memoryless optimum 6.0000 ticks"), "{stdout}");
+    assert_eq!((header("UAV1"), header("UAV2")), (1, 1), "{stdout}");
+}

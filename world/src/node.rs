@@ -79,7 +79,7 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
     match run(&WorldArgs::parse_from(args)) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("world: error: {e:#}");
+            flockstep_proto::output::message(&format!("world: error: {e:#}"));
             std::process::ExitCode::FAILURE
         }
     }

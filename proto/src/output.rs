@@ -1,5 +1,6 @@
-//! The supervisor's own output, written without `println!`/`eprintln!`, which panic when the
-//! stream cannot be written (`supervisor optimum | head -2`, `> /dev/full`, `2>/dev/full`).
+//! What every flockstep program prints, written without `println!`/`eprintln!`, which panic
+//! when the stream cannot be written (`supervisor optimum | head -2`, `agent bt show T >
+//! /dev/full`, `2>/dev/full`).
 //!
 //! Stdout carries what a command produces. Once its reader has gone (a broken pipe) nobody
 //! wants the rest, so the rest is dropped quietly and the command ends with the status it
@@ -8,16 +9,19 @@
 //! is an error naming stdout. Stderr carries messages about the command; when it cannot be
 //! written there is nowhere left to report that, so its failures are ignored.
 
-use anyhow::Result;
-use std::io::{ErrorKind, Write};
+use std::io::{Error, ErrorKind, Write};
 
 /// Writes `text` and a newline to stdout (see the module's doc for a reader that has gone).
-pub fn line(text: &str) -> Result<()> {
+pub fn line(line: &str) -> Result<(), Error> {
+    text(&format!("{line}\n"))
+}
+
+/// Writes `text` as it is to stdout (see the module's doc for a reader that has gone).
+pub fn text(text: &str) -> Result<(), Error> {
     let mut stdout = std::io::stdout().lock();
-    let written = stdout.write_all(text.as_bytes()).and_then(|()| stdout.write_all(b"\n"));
-    match written.and_then(|()| stdout.flush()) {
+    match stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush()) {
         Err(e) if e.kind() != ErrorKind::BrokenPipe => {
-            Err(anyhow::Error::new(e).context("cannot write to stdout"))
+            Err(Error::new(e.kind(), format!("cannot write to stdout: {e}")))
         }
         _ => Ok(()),
     }
