@@ -42,6 +42,9 @@ pub struct Reference {
     pub value: f64,
     /// Shown after the value in the legend.
     pub detail: Option<String>,
+    /// The series whose colour the line takes: the curve it belongs to (an agent's greedy
+    /// length after training beside its learning curve). None: a colour of its own.
+    pub curve: Option<usize>,
 }
 
 impl Reference {
@@ -150,7 +153,8 @@ type DrawResult = Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
 impl Panel {
     /// Draws the series, then as dashed lines the references within the panel's range, each
-    /// in the color its place in `references` gives it in every panel.
+    /// in its curve's color or else the color its place in `references` gives it, the same in
+    /// every panel.
     fn draw(
         &self,
         area: &DrawingArea<SVGBackend, Shift>,
@@ -186,7 +190,7 @@ impl Panel {
         }
         let shown = references.iter().enumerate().filter(|(_, r)| self.y.contains(&r.value));
         for (i, r) in shown {
-            let color = COLORS[(series.len() + i) % COLORS.len()];
+            let color = COLORS[r.curve.unwrap_or(series.len() + i) % COLORS.len()];
             let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: 1 };
             let (dash, gap) = (6, 4);
             chart
@@ -224,11 +228,12 @@ mod tests {
             (0..=10_000).map(|e| (e as f64, 100.0 - e as f64 / 200.0)).collect();
         let series = [Series::from_points("UAV1".into(), &points)];
         let references = [
-            Reference { label: "optimum".into(), value: 11.5, detail: None },
+            Reference { label: "optimum".into(), value: 11.5, detail: None, curve: None },
             Reference {
                 label: "greedy".into(),
                 value: 250.636,
                 detail: Some("967 of 4000 truncated".into()),
+                curve: None,
             },
         ];
         let texts = drawn_texts(&series, &references);
@@ -268,8 +273,8 @@ mod tests {
         let range = zoom(&curves, &[], 1000.0).unwrap();
         assert!(range.start > 11.5 && range.start < 12.0, "{range:?} is not fitted to 12..13");
         assert!(range.end > 13.0 && range.end < 13.5, "{range:?} is not fitted to 12..13");
-        let optimum = Reference { label: "optimum".into(), value: 8.0, detail: None };
-        let looping = Reference { label: "greedy".into(), value: 250.0, detail: None };
+        let optimum = Reference { label: "optimum".into(), value: 8.0, detail: None, curve: None };
+        let looping = Reference { label: "greedy".into(), value: 250.0, detail: None, curve: None };
         let range = zoom(&curves, &[optimum, looping], 1000.0).unwrap();
         assert!(range.start < 8.0 && range.start > 7.0, "{range:?} leaves out the optimum");
         assert!(range.end > 13.0 && range.end < 13.5, "{range:?} makes room for the loop");
@@ -282,6 +287,21 @@ mod tests {
         plot_curves(&path, "test", series, references).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         svg.lines().map(|l| l.trim().to_string()).collect()
+    }
+
+    /// A reference tied to a curve is drawn in the curve's colour, one of its own otherwise.
+    #[test]
+    fn a_greedy_line_takes_its_curves_colour() {
+        let curve = [learned_by_episode_1000()];
+        let stroke = |c: RGBColor| format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        let (own, next) = (stroke(COLORS[0]), stroke(COLORS[1]));
+        for (tied, expected) in [(Some(0), false), (None, true)] {
+            let greedy =
+                Reference { label: "greedy".into(), value: 12.0, detail: None, curve: tied };
+            let svg = drawn_texts(&curve, &[greedy]).join("\n");
+            assert!(svg.contains(&own), "the curve's colour {own} is missing");
+            assert_eq!(svg.contains(&next), expected, "curve {tied:?}: {next} drawn?");
+        }
     }
 
     #[test]
@@ -308,7 +328,8 @@ mod tests {
             let series = [Series::from_points("UAV1".into(), &[(0.0, 40.0), (1.0, value)])];
             let e = plot_curves(&path, "test", &series, &[]).unwrap_err().to_string();
             assert!(e.ends_with(expected), "{value}: {e}");
-            let reference = [Reference { label: "optimum".into(), value, detail: None }];
+            let reference =
+                [Reference { label: "optimum".into(), value, detail: None, curve: None }];
             let ok = [Series::from_points("UAV1".into(), &[(0.0, 40.0), (1.0, 30.0)])];
             let e = plot_curves(&path, "test", &ok, &reference).unwrap_err().to_string();
             assert!(e.ends_with(expected), "reference {value}: {e}");

@@ -91,17 +91,20 @@ fn references(figure: Figure) -> Result<Vec<Reference>> {
             label: "optimum".into(),
             value: optimum(&scenario("s1")?, 0).map_err(err)?.expected_ticks,
             detail: None,
+            curve: None,
         }],
         Figure::Fig11 => vec![
             Reference {
                 label: "optimum without communication".into(),
                 value: optimum(&scenario("s2")?, 0).map_err(err)?.expected_ticks,
                 detail: None,
+                curve: None,
             },
             Reference {
                 label: "optimum knowing the target".into(),
                 value: optimum_with_known_target(&scenario("s2")?, 0).map_err(err)?.expected_ticks,
                 detail: None,
+                curve: None,
             },
         ],
     })
