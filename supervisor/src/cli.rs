@@ -296,11 +296,16 @@ pub struct RunArgs {
     /// Behavior tree file [default: the thesis's Fig. 5 tree].
     #[arg(long)]
     pub bt: Option<PathBuf>,
-    #[arg(long, default_value_t = 0.1)]
+    /// Learning rate of the Q-learning update, in [0, 1].
+    // Negative numbers are read as values, so `--alpha -1` is refused for its range (the
+    // same message as `--alpha 2`), not taken for an unknown flag.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub alpha: f64,
-    #[arg(long, default_value_t = 1.0)]
+    /// Discount factor, in [0, 1] (1: the thesis's update, no discount).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub gamma: f64,
-    #[arg(long, default_value_t = 0.1)]
+    /// Exploration rate of the learning selectors during training, in [0, 1].
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub epsilon: f64,
     /// Ticks after which a shared episode is cut (truncated).
     #[arg(long, default_value_t = 1000)]

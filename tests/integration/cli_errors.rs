@@ -164,6 +164,9 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
 fn settings_that_would_make_a_run_meaningless() {
     for_both_transports(&["--agent-timeout-ms", "0"], &["--agent-timeout-ms must be at least 1"]);
     for_both_transports(&["--smoothing", "0"], &["--smoothing must be at least 1"]);
+    // A negative value is a value out of range, not an unknown flag `-1`.
+    for_both_transports(&["--alpha", "-1"], &["--alpha -1 is out of range [0, 1]"]);
+    for_both_transports(&["--epsilon", "1.5"], &["--epsilon 1.5 is out of range [0, 1]"]);
     for_both_transports(
         &["--eval-every", "5", "--eval-block", "0"],
         &["--eval-every 5 needs an --eval-block of at least 1"],
