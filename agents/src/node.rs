@@ -59,7 +59,8 @@ pub struct LearnerArgs {
     pub trace: Option<PathBuf>,
     /// Test aid, off by default, comma-separated: `crash-before-join` (abort before asking
     /// to join), `join-after-file=PATH` (ask to join once PATH exists), `crash-at-round=N`
-    /// (abort), `hang-at-round=N` (stop answering, still obey SIGTERM), `ignore-sigterm`.
+    /// (abort), `hang-at-round=N` (stop answering, still obey SIGTERM), `hang-at-stop` (the
+    /// same at the stop round, before the final snapshots), `ignore-sigterm`.
     #[arg(long)]
     pub fault: Option<String>,
 }
@@ -114,6 +115,8 @@ pub enum Fault {
     JoinAfterFile(PathBuf),
     CrashAtRound(u64),
     HangAtRound(u64),
+    /// Stops answering at the stop round, before writing its final snapshots.
+    HangAtStop,
     IgnoreSigterm,
 }
 
@@ -137,9 +140,10 @@ fn parse_fault(spec: &str) -> Result<Fault> {
         }
         None if spec == "crash-before-join" => Ok(Fault::CrashBeforeJoin),
         None if spec == "ignore-sigterm" => Ok(Fault::IgnoreSigterm),
+        None if spec == "hang-at-stop" => Ok(Fault::HangAtStop),
         _ => bail!(
             "--fault `{spec}`: expected crash-before-join, join-after-file=PATH, crash-at-round=N, \
-             hang-at-round=N or ignore-sigterm"
+             hang-at-round=N, hang-at-stop or ignore-sigterm"
         ),
     }
 }
@@ -304,6 +308,7 @@ fn serve(
             match *fault {
                 Fault::CrashAtRound(r) if observation.round == r => std::process::abort(),
                 Fault::HangAtRound(r) if observation.round == r => hang(),
+                Fault::HangAtStop if observation.kind == ObservationKind::Stop as u8 => hang(),
                 _ => {}
             }
         }

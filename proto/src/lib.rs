@@ -29,7 +29,8 @@ pub use flags::Flags;
 pub use limits::{low_bits, slots_in, MAX_AGENTS, MAX_COMMANDS, MAX_TRIALS};
 pub use pose::{Command, Heading, Height, Pose};
 pub use world_to_agent::{
-    AgentView, Observation, ObservationKind, Phase, Refusal, RunInfo, TrialHeader, TrialObservation,
+    AgentView, Observation, ObservationKind, Phase, Refusal, RunInfo, TrialHeader,
+    TrialObservation, SCENARIO_BYTES,
 };
 pub use world_to_supervisor::{EpisodeBatch, EpisodeReport, EPISODE_BATCH};
 

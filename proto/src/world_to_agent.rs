@@ -254,6 +254,9 @@ impl Observation {
     }
 }
 
+/// Longest scenario (name, `gen:` spec or path) a run can hand on to attaching agents.
+pub const SCENARIO_BYTES: usize = 512;
+
 /// What an agent needs to know to attach to a running run; published once by the world with
 /// history, so an agent that attaches later reads it.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -261,7 +264,7 @@ impl Observation {
 #[type_name("flockstep::RunInfo")]
 pub struct RunInfo {
     /// The scenario as given to the world (`s3`, a path, `gen:...`), UTF-8, NUL-padded.
-    pub scenario: [u8; 512],
+    pub scenario: [u8; SCENARIO_BYTES],
     pub seed: u64,
     pub trials: u32,
     /// Communication mode name, UTF-8, NUL-padded (`none`, `flags`, ...).

@@ -10,7 +10,7 @@ use flockstep_agents::bt::tree::Tree;
 use flockstep_agents::comm::CommMode;
 use flockstep_agents::learning::LearnParams;
 use flockstep_agents::uav::load_uav_tree;
-use flockstep_proto::{MAX_AGENTS, MAX_TRIALS};
+use flockstep_proto::{RunInfo, MAX_AGENTS, MAX_TRIALS, SCENARIO_BYTES};
 use flockstep_world::generate::GenSpec;
 use flockstep_world::scenario::Scenario;
 use flockstep_world::sim::EpisodeConfig;
@@ -272,6 +272,12 @@ fn scenario_for_children(arg: &str) -> Result<String> {
     let text = path.to_str().with_context(|| {
         format!("--scenario {arg}: its absolute path {} is not UTF-8", path.display())
     })?;
+    // Checked here, not by the world at start-up, which would name a path nobody typed.
+    anyhow::ensure!(
+        RunInfo::pack::<SCENARIO_BYTES>(text).is_some(),
+        "--scenario {arg}: its absolute path {text} is longer than the {SCENARIO_BYTES} bytes a run \
+         hands on to attaching agents; move the map to a shorter path"
+    );
     Ok(text.to_string())
 }
 

@@ -128,8 +128,9 @@ struct Fleet<'a> {
 /// then waits for the route, and would take it for admitted: a known limit.)
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Seat {
-    /// Not admitted yet. `free_seen`: its slot has been free since the process started (a
-    /// starting agent's slot is free before round 0, which no report precedes).
+    /// Not admitted yet. `free_seen`: no report still to come can show the slot live for
+    /// another process: a starting agent's slot is free before round 0, which no report
+    /// precedes, and so is a restart's whose predecessor never joined or was seen dropped.
     Waiting { free_seen: bool },
     /// Admitted: its slot turned live while the process ran.
     InBarrier,
@@ -160,10 +161,14 @@ impl Fleet<'_> {
                 logs.join(format!("uav{}.restart{n}.log", slot + 1)),
             ),
         };
+        // Reports that show the slot live may still be the predecessor's, unless it never was
+        // in the barrier (it failed before it joined) or a report already showed it dropped.
+        let predecessor = self.slots.iter().rposition(|s| *s == Some(slot)).map(|i| self.seats[i]);
+        let free_seen = predecessor != Some(Seat::InBarrier);
         let command = agent_command(self.config, slot, restarted)?;
         self.processes.push(Process::spawn(&name, command, &log)?);
         self.slots.push(Some(slot));
-        self.seats.push(Seat::Waiting { free_seen: !restarted });
+        self.seats.push(Seat::Waiting { free_seen });
         self.noted.push(false);
         Ok(())
     }
@@ -187,13 +192,13 @@ impl Fleet<'_> {
     /// agent whose process is gone or that stayed silent past `--agent-timeout-ms`, so a
     /// dropped process that runs is hung (SPEC 4: presumed dead). Once it has exited it is a
     /// failed agent like any other, reported and, if asked, restarted. Those being brought
-    /// down are taken a step further (SIGKILL after SIGTERM's grace); new ones only while
-    /// the run goes on (`start`), not once it stops, when agents leave by themselves.
+    /// down are taken a step further (SIGKILL after SIGTERM's grace). Also once the run
+    /// stops: a dropped agent is outside the barrier, with no last answer to give.
     /// Returns whether any is still being brought down.
-    fn bring_down_dropped(&mut self, start: bool) -> Result<bool> {
+    fn bring_down_dropped(&mut self) -> Result<bool> {
         let mut running = false;
         for (process, seat) in self.processes.iter_mut().zip(&self.seats) {
-            let due = process.brought_down() || (start && *seat == Seat::Dropped);
+            let due = process.brought_down() || *seat == Seat::Dropped;
             if due && !process.exited() && process.status()?.is_none() {
                 process.bring_down();
                 running = true;
@@ -208,16 +213,16 @@ impl Fleet<'_> {
     /// SIGKILL to take effect, then they are left to the ladder.
     fn finish_bringing_down(&mut self) -> Result<()> {
         let deadline = Instant::now() + TERM_GRACE + Duration::from_secs(1);
-        while self.bring_down_dropped(false)? && Instant::now() < deadline {
+        while self.bring_down_dropped()? && Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(5));
         }
         Ok(())
     }
 
     /// Records episode reports until the world exits; asks it to stop on Ctrl-C; reports
-    /// and, if asked, restarts failed agents. A run that ends with an agent that failed while
-    /// in the barrier is an error: that agent's final Q-tables, written as the run ends, are
-    /// lost (an in-process run fails the same way).
+    /// and, if asked, restarts failed agents. An agent that fails in the stop round, where it
+    /// writes its final Q-tables, fails the world and so the run (an in-process run that
+    /// cannot write them fails the same way).
     fn supervise(
         &mut self,
         ports: &SupervisorPorts,
@@ -251,10 +256,9 @@ impl Fleet<'_> {
                 for (_, note) in self.newly_failed_agents()? {
                     recorder.note(format!("{note}; not restarted (the run has ended)"));
                 }
-                self.refuse_lost_tables()?;
                 return Ok(Outcome { complete: control.stop == 0, peak_rss_kib: vec![] });
             }
-            self.bring_down_dropped(control.stop == 0)?;
+            self.bring_down_dropped()?;
             for (slot, note) in self.newly_failed_agents()? {
                 first_failure.get_or_insert_with(|| note.clone());
                 let restart = self.config.restart == Restart::OnFailure
@@ -311,49 +315,31 @@ impl Fleet<'_> {
         }
         Ok(failed)
     }
-
-    /// Fails the run if an agent process failed while in the barrier as the run ended: it
-    /// writes its final Q-tables then, before its last answer, so those results are lost.
-    /// (The world drops an agent that fails earlier, and the reports say so.)
-    fn refuse_lost_tables(&mut self) -> Result<()> {
-        let mut lost = Vec::new();
-        for (process, seat) in self.processes.iter_mut().zip(&self.seats).skip(1) {
-            match process.status()? {
-                Some(status) if !status.success() && *seat == Seat::InBarrier => {
-                    lost.push(format!(
-                        "{} failed as the run ended ({status}): {}",
-                        process.name,
-                        process.last_words()
-                    ))
-                }
-                _ => {}
-            }
-        }
-        anyhow::ensure!(
-            lost.is_empty(),
-            "final Q-tables may not all be saved: {}",
-            lost.join("; ")
-        );
-        Ok(())
-    }
 }
 
 /// What a restart of agent `slot` goes on from: its latest snapshots in `--out`, read as the
 /// agent reads them. Trials that have none (no `--resume`, and the agent failed before its
-/// first `--snapshot-every`) start again from empty tables, and the note says so.
+/// first `--snapshot-every`) start again from empty tables, and the note says so; one whose
+/// snapshot cannot be read makes the restarted agent fail, and the note says why.
 fn restart_note(config: &RunConfig, slot: usize) -> String {
-    let fresh: Vec<String> = (0..config.trials)
-        .filter(|&trial| {
-            !matches!(read_snapshot(&snapshot_path(&config.out, slot, trial)), Ok(Some(_)))
-        })
-        .map(|trial| trial.to_string())
-        .collect();
-    let note = format!("UAV{} restarted from its latest snapshot", slot + 1);
-    if fresh.is_empty() {
-        note
-    } else {
-        format!("{note}; trial(s) {} had none yet and start from empty tables", fresh.join(", "))
+    let mut fresh = Vec::new();
+    let mut unreadable = Vec::new();
+    for trial in 0..config.trials {
+        match read_snapshot(&snapshot_path(&config.out, slot, trial)) {
+            Ok(Some(_)) => {}
+            Ok(None) => fresh.push(trial.to_string()),
+            Err(e) => unreadable.push(e.to_string()),
+        }
     }
+    let mut note = format!("UAV{} restarted from its latest snapshot", slot + 1);
+    if !fresh.is_empty() {
+        note +=
+            &format!("; trial(s) {} had none yet and start from empty tables", fresh.join(", "));
+    }
+    if !unreadable.is_empty() {
+        note += &format!("; it will fail on {}", unreadable.join("; "));
+    }
+    note
 }
 
 /// The supervisor drains the world's episode records at least this often; the world also

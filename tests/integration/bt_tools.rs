@@ -77,3 +77,22 @@ fn a_tree_past_the_command_limit_names_the_node_at_fault() {
     let expected = format!("supervisor: error: {tree}:7: this REPEAT n=20 may issue up to 20 commands in one tick (the whole tree up to 22); the limit is 16");
     assert_eq!(line, expected);
 }
+
+/// A replay lists every action it ticks, so a tree that may tick more than a million in one
+/// tick is refused up front (three nested `REPEAT n=1000`, a billion ticks, used to run
+/// until memory ran out).
+#[test]
+fn replay_refuses_a_tree_that_could_tick_without_bound() {
+    let dir = crate::harness::scratch();
+    let (tree, script) = (dir.path().join("endless.bt"), dir.path().join("endless.script"));
+    let nested = "REPEAT 1 n=1000\n- REPEAT 1 n=1000\n-- REPEAT 1 n=1000\n--- A-step 0\n";
+    std::fs::write(&tree, nested).expect("write the tree");
+    std::fs::write(&script, "step=S\n").expect("write the script");
+    let args = ["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")];
+    let (out, report) = crate::harness::run_fail(crate::harness::AGENT, &args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(":1: this REPEAT n=1000 may issue up to 1000000000 commands in one tick; the limit is 1000000"),
+        "{report}"
+    );
+}

@@ -449,3 +449,21 @@ fn optimum_names_a_route_without_one_and_prints_the_others() {
     assert!(stdout.contains(" UAV2: memoryless optimum 6.0000 ticks"), "{stdout}");
     assert_eq!((header("UAV1"), header("UAV2")), (1, 1), "{stdout}");
 }
+
+/// A map path is handed on to attaching agents in a field of 512 bytes: one longer than
+/// that is refused up front, naming `--scenario` (the world used to fail at start-up).
+#[test]
+fn a_scenario_path_too_long_to_hand_on_is_refused() {
+    let dir = scratch();
+    let deep = ["d", "e", "f", "g", "h"]
+        .iter()
+        .fold(dir.path().to_path_buf(), |path, name| path.join(name.repeat(100)));
+    std::fs::create_dir_all(&deep).expect("create the directories");
+    let map = deep.join("s3.map");
+    let source = crate::harness::repo_file("world/maps/s3_two_uavs_two_targets.map");
+    std::fs::copy(source, &map).expect("copy a map");
+    let (map, out) = (map.display().to_string(), dir.path().join("out").display().to_string());
+    let line = error_line(&["--scenario", &map, "--out", &out, "--episodes", "1"]);
+    assert!(line.contains(&format!("--scenario {map}: its absolute path")), "{line}");
+    assert!(line.contains("is longer than the 512 bytes"), "{line}");
+}

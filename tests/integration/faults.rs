@@ -610,3 +610,29 @@ fn an_overdue_run_is_interrupted_and_reported_with_its_progress() {
     assert_eq!(summary(dir.path())["complete"], false, "{message}");
     assert_nothing_left(&id);
 }
+
+/// An agent that hangs in the stop round never writes its final Q-tables: the world waits
+/// its stop timeout (30 s), names the agent and fails, and the run fails with it, the
+/// results so far written. Before, the world ended the run as complete and only the ladder
+/// noticed the agent.
+#[test]
+fn an_agent_that_hangs_in_the_stop_round_fails_the_run() {
+    let dir = scratch();
+    let (id, out) = (run_id("hang-stop"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 300 --trials 1 --seed 97 --fault 2=hang-at-stop"),
+    ));
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(1), "{report}");
+    let stderr = String::from_utf8_lossy(&status.stderr);
+    assert!(
+        stderr.contains("final Q-tables may not be saved: UAV2 did not answer the stop round"),
+        "{report}"
+    );
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false, "{s:#}");
+    assert_eq!(episode_rows(dir.path()).len(), 2 * 300, "episodes lost: {s:#}");
+    assert_nothing_left(&id);
+}

@@ -17,7 +17,7 @@ use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
 };
 use flockstep_proto::{
-    slots_in, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
+    slots_in, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS, SCENARIO_BYTES,
 };
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -117,7 +117,8 @@ pub fn run(args: &WorldArgs) -> Result<()> {
 
 fn run_info(args: &WorldArgs) -> Result<RunInfo> {
     Ok(RunInfo {
-        scenario: RunInfo::pack(&args.scenario).context("--scenario is longer than 512 bytes")?,
+        scenario: RunInfo::pack(&args.scenario)
+            .with_context(|| format!("--scenario is longer than {SCENARIO_BYTES} bytes"))?,
         seed: args.seed,
         trials: args.trials as u32,
         comm: RunInfo::pack(&args.comm).context("--comm is longer than 16 bytes")?,
@@ -135,8 +136,10 @@ struct Members {
     nodes: [Option<SenderNode>; MAX_AGENTS],
     /// Join requests read and not yet answered: the next round answers them.
     waiting: Vec<(JoinRequest, SenderNode)>,
-    /// A join request refused in the round being prepared, and why: the round tells its
-    /// sender (one a round; another refused request is answered when it is repeated).
+    /// The last join request refused, and why: every round tells its sender until the next
+    /// requests are read (a millisecond, hundreds of rounds), since the observation service
+    /// keeps only the newest rounds and an agent preempted for a few rounds would miss a
+    /// single one. One at a time: another refused request is answered when it is repeated.
     refused: Option<(u64, Refusal)>,
 }
 
@@ -258,6 +261,9 @@ impl WorldNode {
     /// first free one, from the next round on; or a refusal that says why (no such route,
     /// route taken, none free). The trials let the agent in at their next episode start.
     fn admit_joiners(&mut self) -> Result<()> {
+        if !self.members.waiting.is_empty() {
+            self.members.refused = None;
+        }
         for (request, node) in std::mem::take(&mut self.members.waiting) {
             if self.members.is_repeat(&request) {
                 continue;
@@ -337,7 +343,7 @@ impl WorldNode {
                 world.observe(observation);
                 let slots = observation.n_slots as usize;
                 observation.owners[..slots].copy_from_slice(&members.owners[..slots]);
-                let (nonce, why) = members.refused.take().map_or((0, 0), |(n, why)| (n, why as u8));
+                let (nonce, why) = members.refused.map_or((0, 0), |(n, why)| (n, why as u8));
                 observation.refused_nonce = nonce;
                 observation.refusal = why;
                 if stop_requested {
@@ -373,6 +379,17 @@ impl WorldNode {
             };
             let answered = self.collect_actions(round, timeout, !stopping)?;
             if stopping {
+                // An agent answers the stop round once its final snapshots are written: one
+                // that did not (gone, or silent past the timeout) lost them, and so the run.
+                let missing: Vec<String> = slots_in(round.live & !answered.answered)
+                    .map(|slot| format!("UAV{}", slot + 1))
+                    .collect();
+                anyhow::ensure!(
+                    missing.is_empty(),
+                    "final Q-tables may not be saved: {} did not answer the stop round (process \
+                     gone, or silent for {timeout:?})",
+                    missing.join(", ")
+                );
                 return Ok(());
             }
             for slot in slots_in(round.live & !answered.answered) {

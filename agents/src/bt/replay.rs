@@ -15,7 +15,8 @@
 //! name stands for every leaf of that name. A leaf ticked without a result is an error that
 //! names the script line. Learning selectors order their children greedily by all-zero
 //! Q-values, so ties are broken by the seeded RNG (`--seed`) and the replay is repeatable.
-//! The leaves command no UAV, so a run's limit of commands per tick does not apply here.
+//! The leaves command no UAV, so a run's limit of commands per tick does not apply here; a
+//! replay refuses a tree that may tick more than `MAX_REPLAY_ACTIONS` actions in one tick.
 //!
 //! Output, one line per tick (`name@line` is the node's line in the tree file):
 //!

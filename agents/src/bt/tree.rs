@@ -70,6 +70,11 @@ pub enum TreeError {
     WideLearningSelector { file: String, line: usize, children: usize, limit: usize },
 }
 
+/// Most actions one tick of `agent bt replay` may run: a replay lists every leaf it ticks,
+/// so a `REPEAT n=4294967295` would otherwise run out of memory. Far past any tree of the
+/// thesis, which ticks a handful.
+pub const MAX_REPLAY_ACTIONS: usize = 1_000_000;
+
 /// Most children a learning selector may have: a tick keeps the children it tried in one
 /// word. (Its Q-table has a column per child; 64 actions is far past any tree of the thesis.)
 pub const MAX_LEARNING_CHILDREN: usize = 64;
@@ -156,19 +161,21 @@ impl Tree {
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
-        check_commands(spec)?;
+        check_commands(spec, MAX_COMMANDS)?;
         Tree::for_replay(spec, params, rng)
     }
 
     /// Builds a tree whose actions command no UAV (`agent bt replay` answers them from a
     /// script), so the run's limit of commands per tick does not apply; the learning
-    /// selector width, which the engine itself needs, is checked.
+    /// selector width, which the engine itself needs, is checked, and so is
+    /// [`MAX_REPLAY_ACTIONS`], which bounds what a replay's tick does and lists.
     pub fn for_replay(
         spec: &TreeSpec,
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
         check_width(spec)?;
+        check_commands(spec, MAX_REPLAY_ACTIONS)?;
         let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
         shape.flatten(&spec.root, &mut 0);
         Ok(Tree::with_shape(Arc::new(shape), params, rng))
@@ -177,7 +184,7 @@ impl Tree {
     /// Whether the tree fits the engine's limits (commands per tick, learning selector
     /// width). [`Tree::new`] checks this too; a run checks it before it starts any process.
     pub fn check(spec: &TreeSpec) -> Result<(), TreeError> {
-        check_commands(spec)?;
+        check_commands(spec, MAX_COMMANDS)?;
         check_width(spec)
     }
 
@@ -675,9 +682,10 @@ fn random_untried(tried: u64, remaining: u32, rng: &mut Xoshiro256PlusPlus) -> u
     }
 }
 
-/// Refuses a tree that may issue more commands in one tick than an action message holds.
-fn check_commands(spec: &TreeSpec) -> Result<(), TreeError> {
-    let (tree_worst, culprit) = worst_case_commands(&spec.root);
+/// Refuses a tree that may issue more than `limit` commands in one tick: a run's
+/// [`MAX_COMMANDS`] (what an action message holds), or a replay's [`MAX_REPLAY_ACTIONS`].
+fn check_commands(spec: &TreeSpec, limit: usize) -> Result<(), TreeError> {
+    let (tree_worst, culprit) = worst_case_commands(&spec.root, limit as u64);
     match culprit {
         Some((node, worst)) => Err(TreeError::TooManyCommands {
             file: spec.source.clone(),
@@ -685,7 +693,7 @@ fn check_commands(spec: &TreeSpec) -> Result<(), TreeError> {
             node: node.kind.label(),
             worst,
             tree_worst,
-            limit: MAX_COMMANDS,
+            limit,
         }),
         None => Ok(()),
     }
@@ -723,15 +731,15 @@ fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
 }
 
 /// Upper bound of the commands one tick can issue: each action issues at most one; loops
-/// multiply their child's bound. Also the node to blame if the bound is past
-/// [`MAX_COMMANDS`], with its own bound: the deepest node past it (followed down the first
+/// multiply their child's bound. Also the node to blame if the bound is past `limit`, with
+/// its own bound: the deepest node past it (followed down the first
 /// child past it), since the root's line says nothing when a `REPEAT` deep inside is the
 /// cause; `None` if the tree is within the limit.
-fn worst_case_commands(spec: &NodeSpec) -> (u64, Option<(&NodeSpec, u64)>) {
+fn worst_case_commands(spec: &NodeSpec, limit: u64) -> (u64, Option<(&NodeSpec, u64)>) {
     let mut children: u64 = 0;
     let mut culprit = None;
     for child in &spec.children {
-        let (worst, deeper) = worst_case_commands(child);
+        let (worst, deeper) = worst_case_commands(child, limit);
         children = children.saturating_add(worst);
         culprit = culprit.or(deeper);
     }
@@ -742,7 +750,7 @@ fn worst_case_commands(spec: &NodeSpec) -> (u64, Option<(&NodeSpec, u64)>) {
         NodeKind::Retry { attempts } => children.saturating_mul(u64::from(*attempts)),
         _ => children,
     };
-    if culprit.is_none() && worst > MAX_COMMANDS as u64 {
+    if culprit.is_none() && worst > limit {
         culprit = Some((spec, worst));
     }
     (worst, culprit)
