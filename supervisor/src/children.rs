@@ -127,7 +127,7 @@ impl Process {
 }
 
 /// Waits until every process has exited, for at most `grace`. True if all did.
-fn wait_all(processes: &mut [Process], grace: Duration) -> Result<bool> {
+fn wait_all(processes: &mut [&mut Process], grace: Duration) -> Result<bool> {
     let deadline = Instant::now() + grace;
     loop {
         let mut running = 0;
@@ -149,7 +149,7 @@ fn wait_all(processes: &mut [Process], grace: Duration) -> Result<bool> {
 /// The shutdown ladder: let them leave for `grace`, then SIGTERM and wait [`TERM_GRACE`],
 /// then SIGKILL and wait until they are gone. Returns the names of those that had to be
 /// signalled.
-pub fn shut_down(processes: &mut [Process], grace: Duration) -> Result<Vec<String>> {
+pub fn shut_down(processes: &mut [&mut Process], grace: Duration) -> Result<Vec<String>> {
     let mut forced = Vec::new();
     if wait_all(processes, grace)? {
         return Ok(forced);

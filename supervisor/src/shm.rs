@@ -48,19 +48,9 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     if let Some(dir) = &config.trace_dir {
         create_trace_files(dir, config.uavs)?;
     }
-    let mut fleet = Fleet {
-        config,
-        processes: Vec::new(),
-        slots: Vec::new(),
-        seats: Vec::new(),
-        noted: Vec::new(),
-        restarts: vec![0; config.uavs],
-    };
-    fleet.processes.push(Process::spawn("world", world_command(config)?, &logs.join("world.log"))?);
-    fleet.slots.push(None);
-    fleet.seats.push(Seat::Waiting { free_seen: false });
-    fleet.noted.push(false);
-    let result = open_ports(config, &mut fleet.processes[0]).and_then(|ports| {
+    let world = Process::spawn("world", world_command(config)?, &logs.join("world.log"))?;
+    let mut fleet = Fleet { config, world, agents: Vec::new(), restarts: vec![0; config.uavs] };
+    let result = open_ports(config, &mut fleet.world).and_then(|ports| {
         for slot in 0..config.uavs {
             fleet.spawn_agent(slot, false)?;
         }
@@ -70,11 +60,14 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     });
     // A failed run brings its children down at once; a finished one lets them leave.
     let grace = if result.is_ok() { GRACE } else { Duration::ZERO };
-    let forced = shut_down(&mut fleet.processes, grace)?;
+    let mut processes: Vec<&mut Process> = std::iter::once(&mut fleet.world)
+        .chain(fleet.agents.iter_mut().map(|agent| &mut agent.process))
+        .collect();
+    let forced = shut_down(&mut processes, grace)?;
     cleanup_run(&config.run_id).context("removing the run's shared-memory resources")?;
     let mut outcome = result?;
     outcome.peak_rss_kib =
-        fleet.processes.iter().filter_map(|p| Some((p.name.clone(), p.peak_rss_kib?))).collect();
+        processes.iter().filter_map(|p| Some((p.name.clone(), p.peak_rss_kib?))).collect();
     if !forced.is_empty() {
         recorder.note(format!("had to signal {} to stop", forced.join(", ")));
     }
@@ -107,15 +100,21 @@ fn count(n: usize, thing: &str) -> String {
 /// The world and the agent processes of a run.
 struct Fleet<'a> {
     config: &'a RunConfig,
-    processes: Vec<Process>,
-    /// Per process: the agent slot it serves (None: the world).
-    slots: Vec<Option<usize>>,
-    /// Per process: where it stands in the barrier, as the episode reports show it (the
-    /// world's stays `Waiting`).
-    seats: Vec<Seat>,
-    /// Per process: its failure has been noted.
-    noted: Vec<bool>,
+    world: Process,
+    /// Every agent process started, restarts included, in the order they were started.
+    agents: Vec<AgentProcess>,
     restarts: Vec<u32>,
+}
+
+/// An agent process the supervisor started, and what it knows of it.
+struct AgentProcess {
+    process: Process,
+    /// The slot it serves.
+    slot: usize,
+    /// Where it stands in the barrier, as the episode reports show it.
+    seat: Seat,
+    /// Its failure has been noted.
+    noted: bool,
 }
 
 /// Where an agent process stands in the barrier, as far as the supervisor can tell. The world
@@ -163,13 +162,16 @@ impl Fleet<'_> {
         };
         // Reports that show the slot live may still be the predecessor's, unless it never was
         // in the barrier (it failed before it joined) or a report already showed it dropped.
-        let predecessor = self.slots.iter().rposition(|s| *s == Some(slot)).map(|i| self.seats[i]);
+        let predecessor = self.agents.iter().rev().find(|a| a.slot == slot).map(|a| a.seat);
         let free_seen = predecessor != Some(Seat::InBarrier);
         let command = agent_command(self.config, slot, restarted)?;
-        self.processes.push(Process::spawn(&name, command, &log)?);
-        self.slots.push(Some(slot));
-        self.seats.push(Seat::Waiting { free_seen });
-        self.noted.push(false);
+        let process = Process::spawn(&name, command, &log)?;
+        self.agents.push(AgentProcess {
+            process,
+            slot,
+            seat: Seat::Waiting { free_seen },
+            noted: false,
+        });
         Ok(())
     }
 
@@ -178,11 +180,9 @@ impl Fleet<'_> {
     fn record_reports(&mut self, ports: &SupervisorPorts, recorder: &mut Recorder) -> Result<()> {
         while let Some(report) = ports.try_episode()? {
             recorder.record(&report)?;
-            for (i, slot) in self.slots.iter().enumerate() {
-                if let Some(slot) = slot {
-                    let live = report.live >> slot & 1 == 1;
-                    self.seats[i] = self.seats[i].after(live, self.processes[i].exited());
-                }
+            for agent in &mut self.agents {
+                let live = report.live >> agent.slot & 1 == 1;
+                agent.seat = agent.seat.after(live, agent.process.exited());
             }
         }
         Ok(())
@@ -197,7 +197,7 @@ impl Fleet<'_> {
     /// Returns whether any is still being brought down.
     fn bring_down_dropped(&mut self) -> Result<bool> {
         let mut running = false;
-        for (process, seat) in self.processes.iter_mut().zip(&self.seats) {
+        for AgentProcess { process, seat, .. } in &mut self.agents {
             let due = process.brought_down() || *seat == Seat::Dropped;
             if due && !process.exited() && process.status()?.is_none() {
                 process.bring_down();
@@ -240,7 +240,7 @@ impl Fleet<'_> {
                 control.stop = 1;
                 ports.send_control(&control)?;
             }
-            if let Some(status) = self.processes[0].status()? {
+            if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
                 if !status.success() {
                     // An agent may have failed since the last look, and be why the world did.
@@ -249,7 +249,7 @@ impl Fleet<'_> {
                     let cause = first.map_or_else(String::new, |n| format!("; first to fail: {n}"));
                     bail!(
                         "the world process failed ({status}): {}{cause}",
-                        self.processes[0].last_words()
+                        self.world.last_words()
                     );
                 }
                 self.finish_bringing_down()?;
@@ -295,13 +295,12 @@ impl Fleet<'_> {
     /// down because the world dropped it, that.
     fn newly_failed_agents(&mut self) -> Result<Vec<(usize, String)>> {
         let mut failed = Vec::new();
-        for (i, process) in self.processes.iter_mut().enumerate().skip(1) {
+        for AgentProcess { process, slot, noted, .. } in &mut self.agents {
             let Some(status) = process.status()? else { continue };
-            if (status.success() && !process.brought_down()) || self.noted[i] {
+            if (status.success() && !process.brought_down()) || *noted {
                 continue;
             }
-            self.noted[i] = true;
-            let slot = self.slots[i].expect("agent processes serve a slot");
+            *noted = true;
             let note = if process.brought_down() {
                 format!(
                     "{} was dropped by the world: silent past the deadline (--agent-timeout-ms \
@@ -311,7 +310,7 @@ impl Fleet<'_> {
             } else {
                 format!("{} failed ({status}): {}", process.name, process.last_words())
             };
-            failed.push((slot, note));
+            failed.push((*slot, note));
         }
         Ok(failed)
     }
