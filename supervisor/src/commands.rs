@@ -37,16 +37,9 @@ pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
             .with_context(|| format!("--curve `{spec}`: expected PATH=LABEL"))?;
         loaded.push((label.to_string(), read_smoothed(Path::new(path), 1)?));
     }
-    let series: Vec<Series> = loaded
-        .iter()
-        .map(|(label, points)| Series::from_points(label.clone(), &episode_points(points)))
-        .collect();
+    let series: Vec<Series> =
+        loaded.iter().map(|(label, points)| Series::from_episodes(label.clone(), points)).collect();
     plot_curves(out, title, &series, &[])
-}
-
-/// A curve's (episode, length) points as the plot takes them.
-pub fn episode_points(points: &[(u64, f64)]) -> Vec<(f64, f64)> {
-    points.iter().map(|&(episode, length)| (episode as f64, length)).collect()
 }
 
 /// Writes the generated scenario `spec` as a `.map` file (it loads back as it is).

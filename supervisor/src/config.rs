@@ -275,8 +275,8 @@ fn scenario_for_children(arg: &str) -> Result<String> {
     // Checked here, not by the world at start-up, which would name a path nobody typed.
     anyhow::ensure!(
         RunInfo::pack::<SCENARIO_BYTES>(text).is_some(),
-        "--scenario {arg}: its absolute path {text} is longer than the {SCENARIO_BYTES} bytes a run \
-         hands on to attaching agents; move the map to a shorter path"
+        "--scenario {arg}: its absolute path {text} is longer than the {SCENARIO_BYTES} bytes \
+         a run hands on to attaching agents; move the map to a shorter path"
     );
     Ok(text.to_string())
 }

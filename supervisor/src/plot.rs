@@ -33,6 +33,13 @@ impl Series {
         }
         Series { label, points: kept }
     }
+
+    /// [`Series::from_points`] of a learning curve's (episode, episode length) points.
+    pub fn from_episodes(label: String, points: &[(u64, f64)]) -> Series {
+        let points: Vec<(f64, f64)> =
+            points.iter().map(|&(e, length)| (e as f64, length)).collect();
+        Series::from_points(label, &points)
+    }
 }
 
 /// A horizontal reference line, e.g. "optimum (11.50)", or "UAV1 greedy after training

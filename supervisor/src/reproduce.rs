@@ -4,7 +4,6 @@
 //! optima as reference lines. Every run is an ordinary run with its own results directory.
 
 use crate::cli::{Figure, RunArgs};
-use crate::commands::episode_points;
 use crate::config::RunConfig;
 use crate::curve::read_smoothed;
 use crate::plot::{plot_curves, Reference, Series};
@@ -59,7 +58,7 @@ pub fn reproduce(
     let references = references(figure)?;
     let series: Vec<Series> = curves
         .iter()
-        .map(|(label, _, points)| Series::from_points(label.to_string(), &episode_points(points)))
+        .map(|(label, _, points)| Series::from_episodes(label.to_string(), points))
         .collect();
     let path = out.join(format!("{name}.svg"));
     let title = match figure {

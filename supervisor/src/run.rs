@@ -155,9 +155,9 @@ fn write_results(
         .iter()
         .take(PLOTTED_AGENTS)
         .map(|c| {
-            let points: Vec<(f64, f64)> =
-                c.episodes.iter().zip(&c.smoothed).map(|(&e, &y)| (e as f64, y)).collect();
-            Series::from_points(
+            let points: Vec<(u64, f64)> =
+                c.episodes.iter().copied().zip(c.smoothed.iter().copied()).collect();
+            Series::from_episodes(
                 format!("UAV{} (mean of {} trials)", c.agent, config.trials),
                 &points,
             )
