@@ -247,9 +247,7 @@ fn check_episode_counts(args: &RunArgs) -> Result<()> {
             plan.blocks
         );
     }
-    let greedy =
-        plan.blocks.checked_mul(plan.block).and_then(|n| n.checked_add(args.eval_episodes));
-    if greedy.is_none() {
+    if plan.greedy_episodes(args.eval_episodes).is_none() {
         bail!(
             "--eval-block {} with --eval-episodes {}: {} blocks and the final evaluation are \
              more greedy episodes per trial than a run can count",

@@ -1,5 +1,5 @@
 //! What the supervisor does with each episode report while a run goes on: record it and
-//! show progress (episodes, mean episode length, ticks/s, live agents).
+//! show progress (phase, episodes, mean episode length, ticks/s, live agents).
 
 use crate::results::Collector;
 use anyhow::Result;
@@ -15,19 +15,23 @@ pub struct Recorder {
     bar: ProgressBar,
     quiet: bool,
     started: Instant,
-    last_draw: Instant,
+    /// When the message was last redrawn; None until the first redraw, which is at once.
+    last_draw: Option<Instant>,
     env_steps: u64,
     live: usize,
-    /// Training episodes recorded since the bar last moved: it moves at each redraw, since
-    /// a move reads the clock and records come by the thousand.
+    /// Episodes recorded since the bar last moved: it moves at each redraw, since a move
+    /// reads the clock and records come by the thousand.
     unshown: u64,
+    /// The phase of the latest record, shown before the bar: a final greedy evaluation of
+    /// policies that hit the tick cap can take a while after the last training episode.
+    phase: Phase,
     /// What went wrong on the way (lost or restarted agents...), for `summary.json`. Kept
     /// here rather than returned by the transport so that a run that fails keeps them too.
     notes: Vec<String>,
 }
 
 impl Recorder {
-    /// `total` is the number of training episodes over every trial.
+    /// `total` is the number of episodes, training and greedy, over every trial.
     pub fn new(collector: Collector, total: u64, quiet: bool) -> Recorder {
         let bar = if quiet {
             ProgressBar::hidden()
@@ -36,21 +40,23 @@ impl Recorder {
         };
         bar.set_style(
             ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}",
+                "{elapsed_precise} {prefix:8} [{bar:30}] {pos}/{len} episodes  {msg}",
             )
             .expect("a valid template")
             .progress_chars("=> "),
         );
-        let now = Instant::now();
+        // Until the first record: the processes start and join.
+        bar.set_prefix("starting");
         Recorder {
             collector,
             bar,
             quiet,
-            started: now,
-            last_draw: now,
+            started: Instant::now(),
+            last_draw: None,
             env_steps: 0,
             live: 0,
             unshown: 0,
+            phase: Phase::Train,
             notes: Vec::new(),
         }
     }
@@ -82,32 +88,42 @@ impl Recorder {
             .unwrap_or(0);
         self.env_steps += duration * u64::from(report.members.count_ones());
         self.live = report.live.count_ones() as usize;
-        if report.phase == Phase::Train as u8 {
-            self.unshown += 1;
-        }
+        self.unshown += 1;
+        // The collector refused a record of no known phase.
+        self.phase = Phase::from_u8(report.phase).unwrap_or(Phase::Train);
         Ok(())
     }
 
     /// Redraws the progress message, at most a few times a second.
     pub fn redraw(&mut self) {
         self.bar.inc(std::mem::take(&mut self.unshown));
-        if self.last_draw.elapsed() < Duration::from_millis(200) {
+        if self.last_draw.is_some_and(|last| last.elapsed() < Duration::from_millis(200)) {
             return;
         }
-        self.last_draw = Instant::now();
-        let recent = self.collector.train_lengths().first().map(|trials| {
-            let tail: Vec<u32> =
-                trials.iter().flat_map(|t| t.last(RECENT / trials.len().max(1))).collect();
-            tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
+        self.last_draw = Some(Instant::now());
+        self.bar.set_prefix(match self.phase {
+            Phase::Train => "training",
+            Phase::Eval => "greedy",
         });
+        // UAV1's lengths: the recent training ones, or in the final evaluation its greedy
+        // ones so far (a periodic block shows the training ones).
+        let lengths = match (self.phase, self.collector.greedy(0)) {
+            (Phase::Eval, Some(greedy)) => {
+                format!("greedy mean length {:.1}, {} truncated", greedy.mean(), greedy.truncated)
+            }
+            _ => {
+                let recent = self.collector.train_lengths().first().map(|trials| {
+                    let tail: Vec<u32> =
+                        trials.iter().flat_map(|t| t.last(RECENT / trials.len().max(1))).collect();
+                    tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
+                });
+                format!("mean length {:.1}", recent.unwrap_or(0.0))
+            }
+        };
         let ticks_per_s =
             self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
-        self.bar.set_message(format!(
-            "mean length {:.1}  {:.0} ticks/s  {} live agents",
-            recent.unwrap_or(0.0),
-            ticks_per_s,
-            self.live
-        ));
+        self.bar
+            .set_message(format!("{lengths}  {ticks_per_s:.0} ticks/s  {} live agents", self.live));
     }
 
     pub fn set_live(&mut self, live: usize) {
@@ -125,5 +141,46 @@ impl Recorder {
 
     pub fn env_steps(&self) -> u64 {
         self.env_steps
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::EvalPlan;
+
+    fn report(phase: Phase, episode: u64, length: u32, truncated: bool) -> EpisodeReport {
+        let mut report = EpisodeReport { phase: phase as u8, episode, ..Default::default() };
+        report.members = 1;
+        report.lengths[0] = length;
+        report.truncated = u64::from(truncated);
+        report
+    }
+
+    #[test]
+    fn the_progress_counts_greedy_episodes_and_names_the_phase() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
+        let mut recorder = Recorder::new(collector, 4, true);
+        assert_eq!(recorder.bar.prefix(), "starting");
+        for episode in 0..2 {
+            recorder.record(&report(Phase::Train, episode, 20, false)).unwrap();
+        }
+        recorder.redraw();
+        assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (2, "training".into()));
+        assert!(
+            recorder.bar.message().starts_with("mean length 20.0 "),
+            "{}",
+            recorder.bar.message()
+        );
+
+        recorder.record(&report(Phase::Eval, 0, 10, false)).unwrap();
+        recorder.record(&report(Phase::Eval, 1, 1000, true)).unwrap();
+        // The message is redrawn at most every 200 ms: let this redraw through.
+        recorder.last_draw = None;
+        recorder.redraw();
+        assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (4, "greedy".into()));
+        let message = recorder.bar.message();
+        assert!(message.starts_with("greedy mean length 505.0, 1 truncated "), "{message}");
     }
 }

@@ -82,6 +82,12 @@ impl EvalPlan {
         EvalPlan { blocks, block, every }
     }
 
+    /// Greedy episodes a trial plays: every periodic block, then `final_episodes`; None past
+    /// `u64`.
+    pub fn greedy_episodes(&self, final_episodes: u64) -> Option<u64> {
+        self.blocks.checked_mul(self.block)?.checked_add(final_episodes)
+    }
+
     /// The periodic block of evaluation episode `index`, or None for the final evaluation.
     fn block_of(&self, index: u64) -> Option<usize> {
         // Saturating: past `u64`, every episode number is in a periodic block (a run's

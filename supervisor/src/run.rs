@@ -56,8 +56,10 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     let e = &config.episodes;
     let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
     let collector = Collector::create(&config.out, config.uavs, config.trials, plan)?;
-    // Only the progress bar's length: `RunConfig::resolve` refuses a count past `u64`.
-    let total = config.episodes.train_episodes.saturating_mul(config.trials as u64);
+    // Every episode the run plays, training and greedy, is on the progress bar. Only its
+    // length: `RunConfig::resolve` refuses counts past `u64`.
+    let per_trial = plan.greedy_episodes(e.eval_episodes).unwrap_or(u64::MAX);
+    let total = per_trial.saturating_add(e.train_episodes).saturating_mul(config.trials as u64);
     let mut recorder = Recorder::new(collector, total, config.quiet);
     let started = Instant::now();
     let result = match config.transport {
