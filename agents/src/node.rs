@@ -307,8 +307,10 @@ fn serve(
         for fault in &faults {
             match *fault {
                 Fault::CrashAtRound(r) if observation.round == r => std::process::abort(),
-                Fault::HangAtRound(r) if observation.round == r => hang(),
-                Fault::HangAtStop if observation.kind == ObservationKind::Stop as u8 => hang(),
+                Fault::HangAtRound(r) if observation.round == r => hang(r),
+                Fault::HangAtStop if observation.kind == ObservationKind::Stop as u8 => {
+                    hang(observation.round)
+                }
                 _ => {}
             }
         }
@@ -412,7 +414,9 @@ fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
 }
 
 /// Stops answering (fault injection) but still leaves on SIGTERM.
-fn hang() -> ! {
+fn hang(round: u64) -> ! {
+    // In the agent's log: a test waits for it before it acts on the hung agent.
+    tracing::warn!(round, "hanging here (--fault)");
     loop {
         std::thread::sleep(Duration::from_millis(10));
         if termination_requested() {

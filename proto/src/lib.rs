@@ -32,7 +32,7 @@ pub use world_to_agent::{
     AgentView, Observation, ObservationKind, Phase, Refusal, RunInfo, TrialHeader,
     TrialObservation, SCENARIO_BYTES,
 };
-pub use world_to_supervisor::{EpisodeBatch, EpisodeReport, EPISODE_BATCH};
+pub use world_to_supervisor::{EpisodeBatch, EpisodeReport, Membership, EPISODE_BATCH};
 
 /// A field received from another process held a value outside its range.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -19,8 +19,8 @@ mod wait;
 
 pub use cleanup::{cleanup_run, leftover_files, sweep_stale_runs, RunCleanup, SweepReport};
 pub use ports::{
-    ActionLoan, ActionSample, AgentPorts, ObservationSample, Peers, SenderNode, SupervisorPorts,
-    WorldPorts, EPISODE_WAKE_EVERY,
+    ActionLoan, ActionSample, AgentPorts, FromWorld, ObservationSample, Peers, SenderNode,
+    SupervisorPorts, WorldPorts, EPISODE_WAKE_EVERY,
 };
 pub use run_services::{RunServices, EPISODE_BUFFER, MAX_NODES, SPARE};
 pub use wait::{WaitPolicy, Waiter};

@@ -1,9 +1,12 @@
-//! World -> supervisor: one record per finished episode of one trial, sent in batches.
+//! World -> supervisor: one record per finished episode of one trial, sent in batches, and
+//! with each batch the barrier's membership.
 //!
 //! At 4 trials an episode ends in about one round in four; one sample per record cost the
 //! world a loan and a send in each of those rounds, and the supervisor a receive per record.
 //! The world gathers records in an [`EpisodeBatch`] and sends it when it is full, once per
-//! millisecond, and when its rounds end.
+//! millisecond, and when its rounds end; and at once, records or not, when an agent joins or
+//! is dropped, so the supervisor sees every change of [`Membership`] in order: which of its
+//! processes the world admitted, and which it dropped while they still run (hung).
 
 use crate::limits::MAX_AGENTS;
 use crate::FieldError;
@@ -27,9 +30,6 @@ pub struct EpisodeReport {
     pub members: u64,
     /// Bit i set: agent slot i did not finish before the tick cap.
     pub truncated: u64,
-    /// Bit i set: agent slot i is in the barrier when the episode ends (joins and losses
-    /// show up here).
-    pub live: u64,
     /// Ticks up to and including the agent's `A-endEpisode` (the cap if truncated).
     pub lengths: [u32; MAX_AGENTS],
 }
@@ -45,16 +45,45 @@ impl Default for EpisodeReport {
             start_tick: 0,
             members: 0,
             truncated: 0,
-            live: 0,
             lengths: [0; MAX_AGENTS],
         }
+    }
+}
+
+/// Which agent process holds each slot of the barrier.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("flockstep::Membership")]
+pub struct Membership {
+    /// Bit i set: agent slot i is in the barrier.
+    pub live: u64,
+    /// The process id of slot i's agent while it is live (0 if the world could not tell).
+    pub pids: [u32; MAX_AGENTS],
+}
+
+impl Default for Membership {
+    fn default() -> Self {
+        Membership { live: 0, pids: [0; MAX_AGENTS] }
+    }
+}
+
+impl Membership {
+    /// Whether process `pid` holds `slot` in the barrier.
+    pub fn holds(&self, slot: usize, pid: u32) -> bool {
+        slot < MAX_AGENTS && self.live >> slot & 1 == 1 && self.pids[slot] == pid && pid != 0
+    }
+
+    /// Agents in the barrier.
+    pub fn count(&self) -> usize {
+        self.live.count_ones() as usize
     }
 }
 
 /// Records one [`EpisodeBatch`] holds.
 pub const EPISODE_BATCH: usize = 64;
 
-/// Up to [`EPISODE_BATCH`] records, in the order the episodes ended.
+/// Up to [`EPISODE_BATCH`] records, in the order the episodes ended, and the membership
+/// when the batch was sent (after those episodes ended).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("flockstep::EpisodeBatch")]
@@ -62,12 +91,18 @@ pub struct EpisodeBatch {
     /// Records in use, at the front of `reports`.
     pub count: u32,
     pub _reserved: u32,
+    pub membership: Membership,
     pub reports: [EpisodeReport; EPISODE_BATCH],
 }
 
 impl Default for EpisodeBatch {
     fn default() -> Self {
-        EpisodeBatch { count: 0, _reserved: 0, reports: [EpisodeReport::default(); EPISODE_BATCH] }
+        EpisodeBatch {
+            count: 0,
+            _reserved: 0,
+            membership: Membership::default(),
+            reports: [EpisodeReport::default(); EPISODE_BATCH],
+        }
     }
 }
 
@@ -110,6 +145,19 @@ mod tests {
         assert!(!batch.push(&EpisodeReport::default()), "a full batch takes no more");
         let episodes: Vec<u64> = batch.reports().unwrap().iter().map(|r| r.episode).collect();
         assert_eq!(episodes, (0..EPISODE_BATCH as u64).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_slot_is_held_by_the_process_named_while_it_is_live() {
+        let mut membership = Membership { live: 0b101, ..Membership::default() };
+        membership.pids[0] = 41;
+        membership.pids[1] = 42;
+        assert!(membership.holds(0, 41));
+        assert!(!membership.holds(0, 42), "another process");
+        assert!(!membership.holds(1, 42), "slot 1 is not live");
+        assert!(!membership.holds(2, 0), "an unknown process holds nothing");
+        assert!(!membership.holds(MAX_AGENTS, 41));
+        assert_eq!(membership.count(), 2);
     }
 
     #[test]

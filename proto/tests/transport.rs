@@ -5,10 +5,10 @@
 
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    cleanup_run, leftover_files, sweep_stale_runs, RunConfig, RunServices, SignalMode,
-    TransportError,
+    cleanup_run, leftover_files, sweep_stale_runs, FromWorld, RunConfig, RunServices, SignalMode,
+    SupervisorPorts, TransportError,
 };
-use flockstep_proto::{Action, EpisodeReport, Observation};
+use flockstep_proto::{Action, EpisodeReport, Membership, Observation};
 use std::io::BufRead;
 use std::time::Duration;
 
@@ -20,6 +20,16 @@ fn run(test: &str) -> RunConfig {
         RunConfig::new(format!("t-{test}-{}", std::process::id()), SignalMode::Untouched);
     config.open_timeout = BOUND;
     config
+}
+
+/// The supervisor's next episode record, for the tests that change no membership (so
+/// nothing else comes).
+fn try_episode(supervisor: &SupervisorPorts) -> Result<Option<EpisodeReport>, TransportError> {
+    match supervisor.try_next()? {
+        Some(FromWorld::Episode(report)) => Ok(Some(report)),
+        Some(other) => panic!("no membership was changed, yet the world told {other:?}"),
+        None => Ok(None),
+    }
 }
 
 /// Writes round `round` into a published sample, as the world does.
@@ -49,7 +59,7 @@ fn world_agent_and_supervisor_exchange_every_message() {
     world.queue_episode(&EpisodeReport { episode: 11, ..EpisodeReport::default() }).unwrap();
     world.flush_episodes().unwrap();
     let report =
-        supervisor.waiter().wait(&"episode 11", BOUND, || supervisor.try_episode()).unwrap();
+        supervisor.waiter().wait(&"episode 11", BOUND, || try_episode(&supervisor)).unwrap();
     assert_eq!(report.episode, 11);
 
     supervisor.send_control(&Control { stop: 1, ..Control::default() }).unwrap();
@@ -161,7 +171,7 @@ fn the_supervisor_sleeps_until_the_world_wakes_it() {
     let slept = started.elapsed();
     assert!(slept < long / 4, "slept {slept:?}: the world's wake-up was lost");
     let mut drained = 0;
-    while supervisor.try_episode().unwrap().is_some() {
+    while try_episode(&supervisor).unwrap().is_some() {
         drained += 1;
     }
     assert_eq!(drained, flockstep_proto::transport::EPISODE_WAKE_EVERY);
@@ -375,10 +385,49 @@ fn episode_records_outlive_the_world_that_sent_them() {
     world.flush_episodes().unwrap();
     drop(world);
     let mut received = Vec::new();
-    while let Some(report) = supervisor.try_episode().unwrap() {
+    while let Some(report) = try_episode(&supervisor).unwrap() {
         received.push(report.episode);
     }
     assert_eq!(received, (0..sent).collect::<Vec<_>>());
+}
+
+/// The supervisor follows its processes through the membership: each change goes out at
+/// once with the records queued before it, wakes the supervisor, and is told after those
+/// records; a batch that changes nothing tells no membership.
+#[test]
+fn a_change_of_membership_goes_out_at_once_after_the_records_before_it() {
+    let config = run("membership");
+    let mut world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    let mut admitted = Membership { live: 0b11, ..Membership::default() };
+    admitted.pids[..2].copy_from_slice(&[101, 102]);
+    let dropped = Membership { live: 0b01, pids: admitted.pids };
+    world.queue_episode(&EpisodeReport { episode: 0, ..EpisodeReport::default() }).unwrap();
+    world.set_membership(&admitted).unwrap();
+    world.queue_episode(&EpisodeReport { episode: 1, ..EpisodeReport::default() }).unwrap();
+    world.set_membership(&dropped).unwrap();
+    world.queue_episode(&EpisodeReport { episode: 2, ..EpisodeReport::default() }).unwrap();
+    world.flush_episodes().unwrap();
+    // Woken at once by the first change, not at the end of the sleep.
+    let long = Duration::from_secs(60);
+    let started = std::time::Instant::now();
+    supervisor.waiter().sleep(long).unwrap();
+    assert!(started.elapsed() < long / 4, "the membership did not wake the supervisor");
+    let mut told = Vec::new();
+    while let Some(next) = supervisor.try_next().unwrap() {
+        told.push(next);
+    }
+    let episode = |episode| FromWorld::Episode(EpisodeReport { episode, ..Default::default() });
+    assert_eq!(
+        told,
+        [
+            episode(0),
+            FromWorld::Membership(admitted),
+            episode(1),
+            FromWorld::Membership(dropped),
+            episode(2)
+        ]
+    );
 }
 
 #[test]
@@ -391,13 +440,13 @@ fn queued_episode_records_wait_for_a_full_batch_or_a_flush() {
         world.queue_episode(&EpisodeReport { episode, ..EpisodeReport::default() }).unwrap();
     }
     let mut received = Vec::new();
-    while let Some(report) = supervisor.try_episode().unwrap() {
+    while let Some(report) = try_episode(&supervisor).unwrap() {
         received.push(report.episode);
     }
     let full: Vec<u64> = (0..flockstep_proto::EPISODE_BATCH as u64).collect();
     assert_eq!(received, full, "only the full batch went out");
     world.flush_episodes().unwrap();
-    while let Some(report) = supervisor.try_episode().unwrap() {
+    while let Some(report) = try_episode(&supervisor).unwrap() {
         received.push(report.episode);
     }
     assert_eq!(received, (0..queued).collect::<Vec<_>>(), "the flush sent the rest, in order");

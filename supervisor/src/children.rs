@@ -52,6 +52,11 @@ impl Process {
         })
     }
 
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// The exit status, once the process has exited. Reaps it with `wait4`, which also
     /// reports the process's peak memory.
     pub fn status(&mut self) -> Result<Option<ExitStatus>> {

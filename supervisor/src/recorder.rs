@@ -87,7 +87,6 @@ impl Recorder {
             .max()
             .unwrap_or(0);
         self.env_steps += duration * u64::from(report.members.count_ones());
-        self.live = report.live.count_ones() as usize;
         self.unshown += 1;
         // The collector refused a record of no known phase.
         self.phase = Phase::from_u8(report.phase).unwrap_or(Phase::Train);

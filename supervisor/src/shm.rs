@@ -5,7 +5,8 @@
 //! then records what the world reports until the world exits. It watches its children: a
 //! failed agent is reported (the world drops it from the barrier) and, with `--restart
 //! on-failure`, started again from its latest snapshot; an agent the world dropped whose
-//! process still runs (hung) is brought down and is then a failed agent too; a failed world
+//! process still runs (hung; the world names the process of each slot whenever the
+//! barrier's membership changes) is brought down and is then a failed agent too; a failed world
 //! ends the run at once, and so does an agent that fails in the barrier as the run ends (its
 //! final Q-tables are lost). Ctrl-C asks the world to stop at the end of the current round.
 //! Every child is finally brought down by the shutdown ladder and what is left of the run in
@@ -20,7 +21,7 @@ use anyhow::{bail, Context, Result};
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    cleanup_run, sweep_stale_runs, RunConfig as RunIdentity, RunServices, SignalMode,
+    cleanup_run, sweep_stale_runs, FromWorld, RunConfig as RunIdentity, RunServices, SignalMode,
     SupervisorPorts, TransportError,
 };
 use std::path::{Path, PathBuf};
@@ -111,40 +112,33 @@ struct AgentProcess {
     process: Process,
     /// The slot it serves.
     slot: usize,
-    /// Where it stands in the barrier, as the episode reports show it.
+    /// Where it stands in the barrier, as the world tells it.
     seat: Seat,
     /// Its failure has been noted.
     noted: bool,
 }
 
-/// Where an agent process stands in the barrier, as far as the supervisor can tell. The world
-/// says it only through the episode reports, whose `live` bit i is set while slot i is in the
-/// barrier: the slot turns free when the world drops its agent, and live again when the
-/// world admits one. That one need not be this process: reports that arrive after a restart
-/// may have been sent before the world dropped the predecessor, so a restart counts as
-/// admitted only once its slot has been seen free and then live. (An agent that attaches may
-/// also take the freed route first; the supervisor cannot tell it from its own restart, which
-/// then waits for the route, and would take it for admitted: a known limit.)
+/// Where an agent process stands in the barrier. The world tells every change of the
+/// barrier's membership, in order, with the process that holds each slot
+/// ([`flockstep_proto::Membership`]), so a restart is never taken for its predecessor, nor
+/// for an agent that attached on its route.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Seat {
-    /// Not admitted yet. `free_seen`: no report still to come can show the slot live for
-    /// another process: a starting agent's slot is free before round 0, which no report
-    /// precedes, and so is a restart's whose predecessor never joined or was seen dropped.
-    Waiting { free_seen: bool },
-    /// Admitted: its slot turned live while the process ran.
+    /// Not admitted yet.
+    Waiting,
+    /// The world named it as its slot's agent.
     InBarrier,
-    /// Its slot turned free while it was in the barrier: the world dropped it.
+    /// The world stopped naming it: it dropped the process (for good).
     Dropped,
 }
 
 impl Seat {
-    /// The seat after a report whose `live` bit for the process's slot is `live`; `exited`:
-    /// the process is known to have exited (then it cannot be the one admitted).
-    fn after(self, live: bool, exited: bool) -> Seat {
+    /// The seat after a change of membership; `held`: the world names this process as the
+    /// agent of its slot.
+    fn after(self, held: bool) -> Seat {
         match self {
-            Seat::Waiting { .. } if !live => Seat::Waiting { free_seen: true },
-            Seat::Waiting { free_seen: true } if !exited => Seat::InBarrier,
-            Seat::InBarrier if !live => Seat::Dropped,
+            Seat::Waiting if held => Seat::InBarrier,
+            Seat::InBarrier if !held => Seat::Dropped,
             seat => seat,
         }
     }
@@ -160,29 +154,25 @@ impl Fleet<'_> {
                 logs.join(format!("uav{}.restart{n}.log", slot + 1)),
             ),
         };
-        // Reports that show the slot live may still be the predecessor's, unless it never was
-        // in the barrier (it failed before it joined) or a report already showed it dropped.
-        let predecessor = self.agents.iter().rev().find(|a| a.slot == slot).map(|a| a.seat);
-        let free_seen = predecessor != Some(Seat::InBarrier);
         let command = agent_command(self.config, slot, restarted)?;
         let process = Process::spawn(&name, command, &log)?;
-        self.agents.push(AgentProcess {
-            process,
-            slot,
-            seat: Seat::Waiting { free_seen },
-            noted: false,
-        });
+        self.agents.push(AgentProcess { process, slot, seat: Seat::Waiting, noted: false });
         Ok(())
     }
 
-    /// Records the episode reports the world has sent, and follows from their `live` bits
-    /// where each agent process stands in the barrier.
+    /// Records the episode reports the world has sent, and follows through its changes of
+    /// membership where each agent process stands in the barrier.
     fn record_reports(&mut self, ports: &SupervisorPorts, recorder: &mut Recorder) -> Result<()> {
-        while let Some(report) = ports.try_episode()? {
-            recorder.record(&report)?;
-            for agent in &mut self.agents {
-                let live = report.live >> agent.slot & 1 == 1;
-                agent.seat = agent.seat.after(live, agent.process.exited());
+        while let Some(next) = ports.try_next()? {
+            match next {
+                FromWorld::Episode(report) => recorder.record(&report)?,
+                FromWorld::Membership(membership) => {
+                    recorder.set_live(membership.count());
+                    for agent in &mut self.agents {
+                        let held = membership.holds(agent.slot, agent.process.pid());
+                        agent.seat = agent.seat.after(held);
+                    }
+                }
             }
         }
         Ok(())
@@ -463,35 +453,18 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
 mod tests {
     use super::Seat;
 
-    /// Where a process that starts at `seat` stands after reports whose `live` bit for its
-    /// slot is each of `lives` in turn, its process running.
-    fn after(seat: Seat, lives: &[bool]) -> Seat {
-        lives.iter().fold(seat, |seat, &live| seat.after(live, false))
+    /// Where a process that starts waiting stands after changes of membership that name it
+    /// (`true`) or not (`false`) in turn.
+    fn after(held: &[bool]) -> Seat {
+        held.iter().fold(Seat::Waiting, |seat, &held| seat.after(held))
     }
 
     #[test]
-    fn a_starting_agent_is_admitted_by_a_live_report_and_dropped_when_its_slot_turns_free() {
-        let start = Seat::Waiting { free_seen: true };
-        assert_eq!(after(start, &[true]), Seat::InBarrier);
-        assert_eq!(after(start, &[true, true, false]), Seat::Dropped);
-        assert_eq!(after(start, &[true, false, true]), Seat::Dropped, "a drop is for good");
-    }
-
-    /// Reports sent before the world dropped a restart's predecessor show the slot live:
-    /// they must not make the restart admitted, or the predecessor's drop would look like
-    /// the restart's and the fresh process would be brought down.
-    #[test]
-    fn a_restart_is_admitted_only_once_its_slot_was_free_and_then_live() {
-        let start = Seat::Waiting { free_seen: false };
-        assert_eq!(after(start, &[true, true]), start, "the predecessor's live slot");
-        assert_eq!(after(start, &[true, false, false]), Seat::Waiting { free_seen: true });
-        assert_eq!(after(start, &[true, false, true]), Seat::InBarrier);
-        assert_eq!(after(start, &[true, false, true, false]), Seat::Dropped);
-    }
-
-    #[test]
-    fn a_process_that_has_exited_is_never_admitted() {
-        let free = Seat::Waiting { free_seen: true };
-        assert_eq!(free.after(true, true), free, "another agent took the route");
+    fn an_agent_is_admitted_when_the_world_names_it_and_dropped_when_it_no_longer_does() {
+        assert_eq!(after(&[]), Seat::Waiting);
+        assert_eq!(after(&[false, false]), Seat::Waiting, "another process holds the slot");
+        assert_eq!(after(&[false, true]), Seat::InBarrier);
+        assert_eq!(after(&[true, true, false]), Seat::Dropped);
+        assert_eq!(after(&[true, false, true]), Seat::Dropped, "a drop is for good");
     }
 }

@@ -200,6 +200,46 @@ fn an_agent_that_dies_before_joining_does_not_hold_up_the_run() {
     assert_nothing_left(&id);
 }
 
+/// A restart of an agent that failed before it joined: no report ever showed the slot live
+/// for the predecessor, so the supervisor must take the restart for admitted when the slot
+/// turns live; with no snapshot yet it starts from empty tables, and the note says so.
+#[test]
+fn an_agent_that_dies_before_joining_is_restarted_from_empty_tables() {
+    let dir = scratch();
+    let (id, out) = (run_id("prejoin-restart"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 2000 --trials 2 --seed 54 --fault 2=crash-before-join --restart on-failure"),
+    ));
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], true, "{s:#}");
+    let notes: Vec<&str> =
+        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    assert_eq!(notes.len(), 2, "one failure, one restart: {notes:?}");
+    assert!(notes[0].starts_with("UAV2 failed") && notes[0].contains("SIGABRT"), "{notes:?}");
+    assert_eq!(
+        notes[1],
+        "UAV2 restarted from its latest snapshot; trial(s) 0, 1 had none yet and start from \
+         empty tables"
+    );
+    let rows = episode_rows(dir.path());
+    for trial in 0..2 {
+        let flown = |agent| rows.iter().filter(|r| r[0] == trial && r[1] == agent).count();
+        assert_eq!(flown(1), 2000, "trial {trial}: UAV1 did not finish its budget");
+        assert!(flown(2) > 1000, "trial {trial}: the restart flew {} episodes", flown(2));
+    }
+    for trial in 0..2 {
+        let name = format!("uav2_trial{trial}.bin");
+        let bytes = read(&dir.path().join("qtables").join(&name));
+        flockstep_agents::snapshot::Snapshot::decode(&bytes)
+            .unwrap_or_else(|e| panic!("the restart's final {name}: {e}"));
+    }
+    assert_nothing_left(&id);
+}
+
 /// When every agent fails, the world's own error ("every agent is gone") says nothing of why:
 /// the supervisor's error names the first agent to fail, and the results are still written.
 #[test]
@@ -358,7 +398,7 @@ fn a_rogue_publisher_is_rejected_and_changes_nothing() {
         let mut sent = 0;
         let start = Instant::now();
         while sent < 300 && start.elapsed() < Duration::from_secs(60) {
-            while let Ok(Some(_)) = control.try_episode() {}
+            while let Ok(Some(_)) = control.try_next() {}
             // The newest round: a forged answer to an older one would only be stale.
             let mut newest = None;
             while let Ok(Some(observation)) = ports.try_observation() {
@@ -634,5 +674,48 @@ fn an_agent_that_hangs_in_the_stop_round_fails_the_run() {
     let s = summary(dir.path());
     assert_eq!(s["complete"], false, "{s:#}");
     assert_eq!(episode_rows(dir.path()).len(), 2 * 300, "episodes lost: {s:#}");
+    assert_nothing_left(&id);
+}
+
+/// An agent that hangs after Ctrl-C asked the run to stop: the world stops at the end of the
+/// round, which waits for the hung agent's deadline; it then drops it and stops the others.
+/// The supervisor brings the dropped process down itself (it ignores SIGTERM here) and
+/// reports it, not restarted since the run is stopping; the run ends as stopped (130), its
+/// results written, nothing left to the shutdown ladder.
+#[test]
+fn an_agent_that_hangs_as_the_run_stops_is_dropped_and_brought_down() {
+    let dir = scratch();
+    let (id, out) = (run_id("hang-ctrlc"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1 --seed 98 --agent-timeout-ms 2000 --restart on-failure --fault 2=hang-at-round=3000,ignore-sigterm"),
+    ));
+    let log = dir.path().join("logs").join("uav2.log");
+    wait_until("UAV2 to hang at round 3000", DEADLOCK, || {
+        std::fs::read_to_string(&log).is_ok_and(|text| text.contains("hanging here"))
+    });
+    wait_until("the supervisor to handle SIGINT", Duration::from_secs(30), || {
+        catches(run.pid(), libc::SIGINT)
+    });
+    signal(run.pid(), libc::SIGINT);
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "Ctrl-C exits with 130\n{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false, "{s:#}");
+    let notes: Vec<&str> =
+        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    assert_eq!(notes.len(), 1, "one drop, not restarted: {notes:?}");
+    assert!(
+        notes[0].starts_with("UAV2 was dropped by the world: silent past the deadline")
+            && notes[0].contains("SIGKILL")
+            // Which depends on whether the world has exited by the time it is down.
+            && (notes[0].ends_with("not restarted (the run is stopping)")
+                || notes[0].ends_with("not restarted (the run has ended)")),
+        "{notes:?}"
+    );
+    let bytes = read(&dir.path().join("qtables").join("uav1_trial0.bin"));
+    flockstep_agents::snapshot::Snapshot::decode(&bytes)
+        .unwrap_or_else(|e| panic!("UAV1's final snapshot: {e}"));
     assert_nothing_left(&id);
 }

@@ -17,7 +17,8 @@ use flockstep_proto::transport::{
     exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
 };
 use flockstep_proto::{
-    slots_in, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS, SCENARIO_BYTES,
+    slots_in, JoinRequest, Membership, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
+    SCENARIO_BYTES,
 };
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -251,6 +252,7 @@ impl WorldNode {
             tracing::warn!(uav = slot + 1, "its process ended before it asked to join");
             self.world.remove(slot);
         }
+        self.tell_membership()?;
         if self.world.live() == 0 {
             bail!("every starting agent ended before it asked to join: the run cannot go on");
         }
@@ -264,6 +266,7 @@ impl WorldNode {
         if !self.members.waiting.is_empty() {
             self.members.refused = None;
         }
+        let mut admitted = false;
         for (request, node) in std::mem::take(&mut self.members.waiting) {
             if self.members.is_repeat(&request) {
                 continue;
@@ -277,6 +280,7 @@ impl WorldNode {
                 Ok(slot) => {
                     self.world.admit(slot);
                     self.members.seat(slot, &request, node);
+                    admitted = true;
                     tracing::info!(
                         uav = slot + 1,
                         pid = ?node.pid(),
@@ -291,11 +295,24 @@ impl WorldNode {
             // An attaching agent subscribed to the run's description after it was published.
             self.ports.serve_run_info()?;
         }
+        if admitted {
+            self.tell_membership()?;
+        }
         Ok(())
     }
 
+    /// Tells the supervisor who is in the barrier now, with the process of each agent: it
+    /// follows its own processes by this (admitted, or dropped while still running).
+    fn tell_membership(&mut self) -> Result<()> {
+        let mut membership = Membership { live: self.world.live(), ..Membership::default() };
+        for slot in slots_in(membership.live) {
+            membership.pids[slot] = self.members.pid(slot);
+        }
+        Ok(self.ports.set_membership(&membership)?)
+    }
+
     /// Drops agent `slot` from the barrier and every trial.
-    fn drop_agent(&mut self, slot: usize, why: &str) {
+    fn drop_agent(&mut self, slot: usize, why: &str) -> Result<()> {
         tracing::warn!(
             uav = slot + 1,
             pid = self.members.pid(slot),
@@ -307,6 +324,7 @@ impl WorldNode {
         if cleaned > 0 {
             tracing::info!(nodes = cleaned, "removed the resources of dead nodes");
         }
+        self.tell_membership()
     }
 
     /// Runs rounds until every trial is done or the supervisor asks to stop (`stop_requested`:
@@ -398,7 +416,7 @@ impl WorldNode {
                 } else {
                     "silent past the deadline"
                 };
-                self.drop_agent(slot, why);
+                self.drop_agent(slot, why)?;
             }
             if self.world.live() == 0 {
                 bail!("every agent is gone: the run cannot go on");

@@ -266,10 +266,10 @@ impl TrialWorld {
     }
 
     /// Ends the tick. If the shared episode is over (every member finished, or the tick
-    /// cap), appends its report (with the barrier's agent slots `live`) to `reports` and
+    /// cap), appends its report to `reports` and
     /// starts the next episode, phase, or marks the trial done.
     #[inline]
-    fn end_tick(&mut self, live: u64, reports: &mut Vec<EpisodeReport>) {
+    fn end_tick(&mut self, reports: &mut Vec<EpisodeReport>) {
         if self.done {
             return;
         }
@@ -278,7 +278,7 @@ impl TrialWorld {
         self.flags_changed = std::mem::take(&mut self.flags_sent);
         let everyone_finished = self.members & !self.finished == 0;
         if everyone_finished || self.episode_tick >= self.config.tick_cap {
-            reports.push(self.end_episode(live));
+            reports.push(self.end_episode());
         }
     }
 
@@ -286,7 +286,7 @@ impl TrialWorld {
     /// [`TrialWorld::end_tick`], which runs in every tick and is inlined into the round:
     /// episodes end in about one tick in twenty.
     #[inline(never)]
-    fn end_episode(&mut self, live: u64) -> EpisodeReport {
+    fn end_episode(&mut self) -> EpisodeReport {
         let mut report = EpisodeReport {
             trial: self.trial,
             target: self.target as u16,
@@ -294,7 +294,6 @@ impl TrialWorld {
             episode: self.episode(),
             start_tick: self.episode_start,
             members: self.members,
-            live,
             ..EpisodeReport::default()
         };
         for slot in slots_in(self.members) {
@@ -437,7 +436,7 @@ impl World {
     /// Closes the round: every trial ends its tick; finished episodes go to `reports`.
     pub fn end_round(&mut self, reports: &mut Vec<EpisodeReport>) {
         for trial in &mut self.trials {
-            trial.end_tick(self.live, reports);
+            trial.end_tick(reports);
         }
         self.round += 1;
     }
@@ -631,7 +630,7 @@ mod tests {
         world.apply(&hover).expect("a good action");
         world.end_round(&mut reports);
         let [report] = reports.as_slice() else { panic!("one report: {reports:?}") };
-        assert_eq!((report.trial, report.members, report.live, report.truncated), (0, 1, 1, 0));
+        assert_eq!((report.trial, report.members, report.truncated), (0, 1, 0));
         assert_eq!(report.lengths[..2], [1, 0]);
         let view = observation(&world).trial(0).agents[0];
         assert_eq!(

@@ -8,7 +8,7 @@ use super::{
 };
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
-use crate::{Action, EpisodeBatch, EpisodeReport, JoinRequest, Observation, RunInfo};
+use crate::{Action, EpisodeBatch, EpisodeReport, JoinRequest, Membership, Observation, RunInfo};
 use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -84,6 +84,7 @@ impl RunServices {
             wake_agents: self.notifier(&self.wake_agents, WAKE_AGENTS)?,
             wake_supervisor: self.notifier(&self.wake_supervisor, WAKE_SUPERVISOR)?,
             batch: Box::default(),
+            membership_changed: false,
             episodes_published: 0,
             waiter: self.waiter(&self.wake_world, WAKE_WORLD)?,
             services: self,
@@ -114,6 +115,7 @@ impl RunServices {
         Ok(SupervisorPorts {
             episodes,
             received: std::cell::RefCell::new(None),
+            membership: std::cell::Cell::new(Membership::default()),
             control: self.publisher(&self.control, CONTROL)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
@@ -231,8 +233,10 @@ pub struct WorldPorts {
     run_info: Publisher<Ipc, RunInfo, ()>,
     wake_agents: Notifier<Ipc>,
     wake_supervisor: Notifier<Ipc>,
-    /// Records queued and not yet sent.
+    /// Records queued and not yet sent, and the barrier's membership.
     batch: Box<EpisodeBatch>,
+    /// The membership changed since the last batch went out.
+    membership_changed: bool,
     episodes_published: u64,
     waiter: Waiter,
     services: RunServices,
@@ -282,10 +286,20 @@ impl WorldPorts {
         Ok(())
     }
 
-    /// Sends the queued records, if any. Waits (bounded by `report_timeout`) while the
-    /// supervisor's buffer is full; never drops a record silently.
+    /// Tells the supervisor who is in the barrier now: the queued records go out at once
+    /// with it, and it wakes. Agents join and leave rarely; the supervisor follows each of
+    /// its processes through these changes, so none is left for a later batch.
+    pub fn set_membership(&mut self, membership: &Membership) -> Result<(), TransportError> {
+        self.batch.membership = *membership;
+        self.membership_changed = true;
+        self.flush_episodes()
+    }
+
+    /// Sends the queued records, and the membership if it changed, if either. Waits (bounded
+    /// by `report_timeout`) while the supervisor's buffer is full; never drops a record
+    /// silently.
     pub fn flush_episodes(&mut self) -> Result<(), TransportError> {
-        if self.batch.is_empty() {
+        if self.batch.is_empty() && !self.membership_changed {
             return Ok(());
         }
         let loan =
@@ -297,6 +311,7 @@ impl WorldPorts {
         let mut sample = unsafe { loan.assume_init() };
         let count = self.batch.count as usize;
         sample.count = self.batch.count;
+        sample.membership = self.batch.membership;
         sample.reports[..count].copy_from_slice(&self.batch.reports[..count]);
         match sample.send() {
             Ok(_) => {}
@@ -312,10 +327,13 @@ impl WorldPorts {
         self.batch.count = 0;
         // Waking the supervisor for every record cost the barrier about a quarter of its
         // rounds (measured by `benches/throughput.rs`): it is woken each time another
-        // `EPISODE_WAKE_EVERY` records went out and otherwise drains on its own schedule.
+        // `EPISODE_WAKE_EVERY` records went out, and when the membership changed, and
+        // otherwise drains on its own schedule.
         let before = self.episodes_published;
         self.episodes_published += count as u64;
-        if self.episodes_published / EPISODE_WAKE_EVERY > before / EPISODE_WAKE_EVERY {
+        let wake = std::mem::take(&mut self.membership_changed)
+            || self.episodes_published / EPISODE_WAKE_EVERY > before / EPISODE_WAKE_EVERY;
+        if wake {
             self.wake_supervisor.notify().map_err(|e| self.err(WAKE_SUPERVISOR, "notifying", e))?;
         }
         Ok(())
@@ -524,12 +542,25 @@ struct ReceivedBatch {
     batch: Sample<Ipc, EpisodeBatch, ()>,
     /// Records already handed out.
     handed_out: usize,
+    /// Its membership was looked at (after its records).
+    membership_read: bool,
+}
+
+/// What the world tells the supervisor, in the order it happened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FromWorld {
+    /// One finished episode of one trial.
+    Episode(EpisodeReport),
+    /// Who is in the barrier now; told when it differs from what was last told.
+    Membership(Membership),
 }
 
 /// The supervisor's side: reads episode records, sends control commands.
 pub struct SupervisorPorts {
     episodes: Subscriber<Ipc, EpisodeBatch, ()>,
     received: std::cell::RefCell<Option<ReceivedBatch>>,
+    /// The membership last handed out.
+    membership: std::cell::Cell<Membership>,
     control: Publisher<Ipc, Control, ()>,
     wake_world: Notifier<Ipc>,
     waiter: Waiter,
@@ -537,8 +568,9 @@ pub struct SupervisorPorts {
 }
 
 impl SupervisorPorts {
-    /// The next episode record, if any, in the order the world sent them.
-    pub fn try_episode(&self) -> Result<Option<EpisodeReport>, TransportError> {
+    /// The next episode record or change of membership, if any, in the order the world
+    /// sent them: a batch's records, then its membership if it changed.
+    pub fn try_next(&self) -> Result<Option<FromWorld>, TransportError> {
         let run = &self.services.run.run_id;
         let mut received = self.received.borrow_mut();
         loop {
@@ -549,13 +581,22 @@ impl SupervisorPorts {
                     .map_err(|e| port_error(run, EPISODES, "reading a batch", e))?;
                 if let Some(report) = reports.get(current.handed_out) {
                     current.handed_out += 1;
-                    return Ok(Some(*report));
+                    return Ok(Some(FromWorld::Episode(*report)));
+                }
+                let membership = current.batch.membership;
+                if !std::mem::replace(&mut current.membership_read, true)
+                    && membership != self.membership.get()
+                {
+                    self.membership.set(membership);
+                    return Ok(Some(FromWorld::Membership(membership)));
                 }
             }
             let next =
                 self.episodes.receive().map_err(|e| port_error(run, EPISODES, "receiving", e))?;
             match next {
-                Some(batch) => *received = Some(ReceivedBatch { batch, handed_out: 0 }),
+                Some(batch) => {
+                    *received = Some(ReceivedBatch { batch, handed_out: 0, membership_read: false })
+                }
                 None => {
                     *received = None;
                     return Ok(None);
