@@ -32,8 +32,8 @@ use flockstep_world::Scenario;
 use raw_barrier::{children_cpu_us, load1, measure, Error, Measurement};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Instant;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
 
 /// The trial counts measured for each transport.
 const TRIALS: [usize; 2] = [1, 4];
@@ -44,6 +44,11 @@ const SMOKE_EPISODES: u64 = 20;
 const FIRST_PROBE: f64 = 64.0;
 /// Rounds of the first calibration run of a configuration; each next one has 4 times more.
 const FIRST_PROBE_ROUNDS: f64 = 10_000.0;
+/// Runs of 4 times more episodes or rounds that a lookup or a calibration makes at most
+/// (4^12 times the first is far past any `--seconds`): past it, something is wrong.
+const MAX_PROBES: usize = 12;
+/// A supervisor run that lasts longer hangs: it is killed and the bench fails naming it.
+const RUN_BOUND: Duration = Duration::from_secs(600);
 
 fn main() {
     raw_barrier::bench_main("throughput", parent);
@@ -216,7 +221,7 @@ fn print_product(sorted: &[&Product], config: &Config) {
          rounds_per_s={:.0} env_steps_per_s={:.0} min={:.0} max={:.0} \
          summary_rounds_per_s={:.0} summary_env_steps_per_s={:.0} wall_s={:.3} startup_s={:.3} \
          startup_process_s={:.3} process_s={:.3} cpu_us_per_round={:.2} occupancy={:.3} \
-         startup_subtracted={} repeats={} load1={:.2} leftover_files={}",
+         startup_subtracted={} repeats={} load1={:.2}",
         config.transport.name(),
         config.uavs,
         config.trials,
@@ -239,7 +244,6 @@ fn print_product(sorted: &[&Product], config: &Config) {
         sorted.iter().all(|p| p.subtracted),
         sorted.len(),
         run.load1,
-        sorted.iter().map(|p| p.startup.leftover + p.run.leftover).sum::<usize>(),
     );
 }
 
@@ -318,7 +322,7 @@ impl Transport {
 }
 
 /// One configuration of the product.
-#[derive(Clone)]
+#[derive(Debug, Clone)]
 struct Config {
     transport: Transport,
     uavs: usize,
@@ -336,8 +340,6 @@ struct Run {
     process: f64,
     /// CPU of the supervisor and every process it waited for.
     cpu_us: f64,
-    /// Files of the run left in shared memory after the supervisor exited.
-    leftover: usize,
     load1: f64,
 }
 
@@ -446,7 +448,7 @@ impl Bench {
         let load1 = load1();
         let cpu_before = children_cpu_us();
         let started = Instant::now();
-        let output = command.output()?;
+        let output = output_within(&mut command, RUN_BOUND)?;
         let process = started.elapsed().as_secs_f64();
         let cpu_us = children_cpu_us() - cpu_before;
         if !output.status.success() {
@@ -475,9 +477,12 @@ impl Bench {
             wall: number("wall_seconds")?,
             process,
             cpu_us,
-            leftover: leftover_files(&run_id)?.len(),
             load1,
         };
+        let leftover = leftover_files(&run_id)?;
+        if !leftover.is_empty() {
+            return Err(format!("{command:?} left in shared memory: {leftover:?}").into());
+        }
         // The results of a long run are large; keep the temporary directory small.
         std::fs::remove_dir_all(&out)?;
         Ok(run)
@@ -491,7 +496,7 @@ impl Bench {
     fn calibrate(&mut self, config: &Config, seconds: f64) -> Result<u64, Error> {
         let startup = self.run(config, 1)?;
         let mut rounds = FIRST_PROBE_ROUNDS;
-        loop {
+        for _ in 0..MAX_PROBES {
             let episodes = self.episodes_for(config, rounds, seconds)?;
             let probe = self.run(config, episodes)?;
             let took = probe.wall - startup.wall;
@@ -510,6 +515,7 @@ impl Bench {
             }
             rounds *= 4.0;
         }
+        Err(format!("{config:?}: no run of up to {rounds} rounds took {seconds} s / 8").into())
     }
 
     /// The training episodes of a run of about `rounds` rounds. A number of episodes takes
@@ -526,6 +532,11 @@ impl Bench {
             if covered && points.len() >= 2 {
                 break;
             }
+            if points.len() >= MAX_PROBES {
+                return Err(
+                    format!("{config:?}: {MAX_PROBES} runs never reached {rounds} rounds").into()
+                );
+            }
             let episodes = last.map_or(FIRST_PROBE, |p| p.episodes * 4.0);
             let run = self.run(&inproc, episodes as u64)?;
             let point = CurvePoint { episodes, rounds: run.rounds as f64, seconds: run.wall };
@@ -538,4 +549,34 @@ impl Bench {
         let fraction = (rounds / a.rounds).ln() / (b.rounds / a.rounds).ln();
         Ok((a.episodes * (b.episodes / a.episodes).powf(fraction)).round().max(2.0) as u64)
     }
+}
+
+/// Runs `command` to its end and returns its output, as `Command::output` does, but kills it
+/// and fails if it runs longer than `bound`. A watchdog thread waits for the bound, so the
+/// measured processes share the machine with no polling.
+fn output_within(command: &mut Command, bound: Duration) -> Result<Output, Error> {
+    let child = command
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()?;
+    let pid = child.id();
+    let (done, finished) = std::sync::mpsc::channel::<()>();
+    let watchdog = std::thread::spawn(move || {
+        let overdue = finished.recv_timeout(bound).is_err();
+        if overdue {
+            // SAFETY: kill(2) on our own child's pid. Only `wait_with_output` reaps it, and
+            // at the bound that is still waiting (the thread signals `done` once it has).
+            unsafe {
+                libc::kill(pid as libc::pid_t, libc::SIGKILL);
+            }
+        }
+        overdue
+    });
+    let output = child.wait_with_output();
+    let _ = done.send(());
+    let overdue = watchdog.join().map_err(|_| "the watchdog thread panicked")?;
+    if overdue {
+        return Err(format!("{command:?} still ran after {bound:?}: killed").into());
+    }
+    Ok(output?)
 }

@@ -206,8 +206,6 @@ pub struct Measurement {
     pub p99_us: u64,
     /// User + system CPU of all children together.
     pub cpu_us: f64,
-    /// Files of the run found after every child exited (then removed).
-    pub leftover: usize,
     /// One-minute load average when the measurement started: foreign load skews it.
     pub load1: f64,
 }
@@ -218,13 +216,12 @@ impl Measurement {
     }
 
     /// The fields both benches print for repeats of one barrier configuration, sorted by
-    /// rate: the median's rate, the range, the median's latencies and CPU, and the files
-    /// left over by any repeat.
+    /// rate: the median's rate, the range, the median's latencies and CPU.
     pub fn describe(sorted: &[&Measurement]) -> String {
         let median = sorted[sorted.len() / 2];
         format!(
             "rounds_per_s={:.0} min={:.0} max={:.0} p50_us={} p99_us={} cpu_us_per_round={:.2} \
-             repeats={} load1={:.2} leftover_files={}",
+             repeats={} load1={:.2}",
             median.rate(),
             sorted[0].rate(),
             sorted[sorted.len() - 1].rate(),
@@ -233,7 +230,6 @@ impl Measurement {
             median.cpu_us / median.rounds.max(1) as f64,
             sorted.len(),
             median.load1,
-            sorted.iter().map(|m| m.leftover).sum::<usize>(),
         )
     }
 }
@@ -274,6 +270,7 @@ pub fn measure(
     let leftover = leftover_files(run_id)?.len();
     if leftover > 0 {
         cleanup_run(run_id)?;
+        failed.push(format!("{leftover} files left in shared memory (now removed)"));
     }
     let stdout = String::from_utf8_lossy(&output.stdout);
     if !failed.is_empty() {
@@ -296,7 +293,6 @@ pub fn measure(
         p50_us: field("p50_us")? as u64,
         p99_us: field("p99_us")? as u64,
         cpu_us,
-        leftover,
         load1,
     })
 }

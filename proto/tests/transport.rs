@@ -72,12 +72,20 @@ fn world_agent_and_supervisor_exchange_every_message() {
 #[test]
 fn open_waits_until_the_world_has_created_the_services() {
     let config = run("openwait");
+    let (opening_tx, opening) = std::sync::mpsc::channel();
     let opener = {
         let config = config.clone();
         // The ports are not Send: the thread opens, checks and drops them itself.
-        std::thread::spawn(move || RunServices::open(&config).map(|s| s.run_id().to_string()))
+        std::thread::spawn(move || {
+            opening_tx.send(()).expect("the test waits for the opener");
+            RunServices::open(&config).map(|s| s.run_id().to_string())
+        })
     };
+    opening.recv_timeout(BOUND).expect("the opener thread starts");
+    // Time to reach its wait; it cannot succeed before the world exists, nor give up
+    // before `open_timeout` (5 s).
     std::thread::sleep(Duration::from_millis(100));
+    assert!(!opener.is_finished(), "open returned before the world existed");
     let _world = RunServices::create(&config).unwrap().into_world().unwrap();
     let opened = opener.join().expect("opener thread panicked");
     assert_eq!(opened.unwrap(), config.run_id);
@@ -224,9 +232,23 @@ fn child_process() {
     let parent: u32 = std::env::var("FLOCKSTEP_TEST_PARENT").unwrap().parse().unwrap();
     flockstep_proto::transport::exit_with_parent(parent).unwrap();
     let signals =
-        if role == "supervised-agent" { SignalMode::Supervised } else { SignalMode::Untouched };
+        if role.starts_with("supervised") { SignalMode::Supervised } else { SignalMode::Untouched };
     let mut config = RunConfig::new(run_id, signals);
     config.open_timeout = BOUND;
+    if role.ends_with("signals") {
+        // Every port of a run, and a wait that blocks on the listener.
+        let world = RunServices::create(&config).unwrap().into_world().unwrap();
+        let _agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+        let _supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+        let _ = world.waiter().wait(&"nothing", Duration::from_millis(20), || Ok(None::<()>));
+        let status = std::fs::read_to_string("/proc/self/status").unwrap();
+        for line in status.lines().filter(|l| l.starts_with("SigCgt:") || l.starts_with("SigIgn:"))
+        {
+            println!("{line}");
+        }
+        println!("child-ready");
+        return;
+    }
     if role == "world" {
         let _world = RunServices::create(&config).unwrap().into_world().unwrap();
         println!("child-ready");
@@ -276,6 +298,16 @@ fn spawn_child(
     panic!("{role} child exited ({status}) before getting ready; stdout:\n{seen}");
 }
 
+/// Taken by the tests that leave a dead node and look at it before they clean it, and by
+/// those that sweep: a sweep cleans the dead nodes of every run on the machine, so run in
+/// parallel it would clean another test's before that one looked.
+static DEAD_NODES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// [`DEAD_NODES`], also after a test that held it failed.
+fn dead_nodes_lock() -> std::sync::MutexGuard<'static, ()> {
+    DEAD_NODES.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.
 fn spawn_and_kill(config: &RunConfig, role: &str) {
     let (mut child, _, _) = spawn_child(config, role);
@@ -305,8 +337,62 @@ fn sigterm_makes_a_supervised_agent_leave_its_wait_cleanly() {
     assert_eq!(world.services().cleanup_dead_nodes(), 0);
 }
 
+/// The signals a child in `role` catches and ignores once it made every port of a run and
+/// waited on a listener: masks of `SigCgt` and `SigIgn` in its `/proc/self/status`.
+fn signal_masks(role: &str) -> (u64, u64) {
+    let config = run(role);
+    let (mut child, lines, mut seen) = spawn_child(&config, role);
+    for line in lines {
+        seen.push_str(&line.unwrap());
+        seen.push('\n');
+    }
+    assert!(child.wait().unwrap().success(), "stdout:\n{seen}");
+    // The test harness may print its own words before a line of the child's.
+    let mask = |name: &str| {
+        let line = seen
+            .lines()
+            .find_map(|l| l.split_once(name).map(|(_, mask)| mask))
+            .unwrap_or_else(|| panic!("no {name} line: {seen}"));
+        u64::from_str_radix(line.trim(), 16).unwrap_or_else(|e| panic!("{name} {line}: {e}"))
+    };
+    (mask("SigCgt:"), mask("SigIgn:"))
+}
+
+/// iceoryx2 installs, by default, a handler that only latches SIGINT, SIGTERM, SIGTSTP and
+/// ten more (docs/TRANSPORT.md, traps): Ctrl-Z would stop working and SIGTERM no longer
+/// terminate. The transport disables it: a run's ports and waits change no signal unless the
+/// process is supervised, which catches SIGTERM and ignores SIGINT, and nothing else.
+#[test]
+fn ports_and_waits_take_no_signal_unless_the_process_is_supervised() {
+    let bit = |signal: libc::c_int| 1u64 << (signal - 1);
+    let iceoryx2_defaults = [
+        libc::SIGINT,
+        libc::SIGQUIT,
+        libc::SIGABRT,
+        libc::SIGUSR1,
+        libc::SIGUSR2,
+        libc::SIGTERM,
+        libc::SIGCONT,
+        libc::SIGTSTP,
+        libc::SIGTTIN,
+        libc::SIGTTOU,
+        libc::SIGURG,
+        libc::SIGVTALRM,
+        libc::SIGPROF,
+    ]
+    .into_iter()
+    .fold(0, |mask, signal| mask | bit(signal));
+    let (caught, ignored) = signal_masks("untouched-signals");
+    assert_eq!(caught & iceoryx2_defaults, 0, "caught: {caught:x}");
+    assert_eq!(ignored & iceoryx2_defaults, 0, "ignored: {ignored:x}");
+    let (caught, ignored) = signal_masks("supervised-signals");
+    assert_eq!(caught & iceoryx2_defaults, bit(libc::SIGTERM), "caught: {caught:x}");
+    assert_eq!(ignored & iceoryx2_defaults, bit(libc::SIGINT), "ignored: {ignored:x}");
+}
+
 #[test]
 fn a_killed_world_is_swept() {
+    let _sweeps = dead_nodes_lock();
     let config = run("killed");
     spawn_and_kill(&config, "world");
     assert!(
@@ -337,6 +423,7 @@ impl Drop for RemoveDir {
 /// it every later run over shared memory.
 #[test]
 fn a_run_whose_files_cannot_be_removed_does_not_stop_the_sweep() {
+    let _sweeps = dead_nodes_lock();
     // Sorted before the stale run, so the sweep meets it first.
     let stuck = run("sweepa");
     let stale = run("sweepb");
@@ -357,6 +444,7 @@ fn a_run_whose_files_cannot_be_removed_does_not_stop_the_sweep() {
 
 #[test]
 fn the_world_removes_a_killed_agent() {
+    let _sweeps = dead_nodes_lock();
     let config = run("deadagent");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
     spawn_and_kill(&config, "agent");

@@ -297,9 +297,17 @@ fn a_missing_file_is_an_unknown_scenario_that_names_its_path() {
 }
 
 proptest! {
+    /// Refused or not, never a panic; a refusal points into the text (or just past its
+    /// end, for what is missing): 1-based, at most one column past the line's end.
     #[test]
     fn any_text_is_parsed_or_refused_without_panic(text in "\\PC{0,300}") {
-        let _ = parse_map("any.map", &text);
+        if let Err(err) = parse_map("any.map", &text) {
+            prop_assert_eq!(err.file.as_str(), "any.map");
+            let lines: Vec<&str> = text.lines().collect();
+            prop_assert!((1..=lines.len() + 1).contains(&err.line), "{:?}", err);
+            let width = lines.get(err.line - 1).map_or(0, |line| line.chars().count());
+            prop_assert!((1..=width + 1).contains(&err.col), "{:?}", err);
+        }
     }
 
     #[test]
