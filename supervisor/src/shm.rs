@@ -6,9 +6,9 @@
 //! failed agent is reported (the world drops it from the barrier) and, with `--restart
 //! on-failure`, started again from its latest snapshot; an agent the world dropped whose
 //! process still runs (hung; the world names the process of each slot whenever the
-//! barrier's membership changes) is brought down and is then a failed agent too; a failed world
-//! ends the run at once, and so does an agent that fails in the barrier as the run ends (its
-//! final Q-tables are lost). Ctrl-C asks the world to stop at the end of the current round.
+//! barrier's membership changes) is brought down and is then a failed agent too; a failed
+//! world ends the run at once, and so does an agent that fails in the barrier as the run
+//! ends (its final Q-tables are lost). Ctrl-C asks the world to stop at the end of the current round.
 //! Every child is finally brought down by the shutdown ladder and what is left of the run in
 //! shared memory removed.
 
