@@ -244,6 +244,12 @@ impl TrialAgent {
         self.slot
     }
 
+    /// Whether the episode in progress is a training one: between training episodes (the
+    /// greedy evaluations, and once the trial is done) the tables do not change.
+    pub fn is_training(&self) -> bool {
+        self.open.is_some_and(|(phase, _)| phase == Phase::Train as u8)
+    }
+
     /// Training episodes behind this agent's tables in this trial (those of the snapshot it
     /// was restored from included).
     pub fn trained_episodes(&self) -> u64 {

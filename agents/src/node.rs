@@ -4,9 +4,11 @@
 //! It asks the world for a slot, then each round reads the world's observation in place in
 //! shared memory, ticks its tree for every trial through [`UavAgent::act`] (the very code the
 //! in-process runner calls) and publishes its action. Every `--snapshot-every` training
-//! episodes it saves its Q-tables, so a restarted agent can go on from them (`--resume`). On
-//! the stop round it closes its episodes, writes its snapshots and answers once more, so the
-//! world knows they are on disk. `docs/MEMBERSHIP.md` describes the protocol.
+//! episodes, and when a trial's training pauses or ends, it saves its Q-tables, so a
+//! restarted agent can go on from them (`--resume`). On the stop round it closes its
+//! episodes, writes its snapshots and answers once more, so the world knows they are on
+//! disk; a flight ended otherwise (SIGTERM, Ctrl-C for an attached agent, the world gone)
+//! saves them too. `docs/MEMBERSHIP.md` describes the protocol.
 
 use crate::agent::{AgentSpec, UavAgent};
 use crate::bt::render::to_text;
@@ -168,7 +170,7 @@ pub fn run(args: &NodeArgs) -> Result<()> {
 /// `agent --attach RUN_ID`: joins a running simulation on a free route, or the one its
 /// `--uav` names.
 pub fn attach(run_id: &str, args: &AttachArgs) -> Result<()> {
-    let run = RunConfig::new(run_id, SignalMode::Supervised);
+    let run = RunConfig::new(run_id, SignalMode::Interactive);
     let ask = args.uav.map_or(Ok(Ask::Any), |uav| slot_of(uav).map(Ask::Route))?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(run_id));
     serve(&run, ask, None, &args.learner, &out)
@@ -281,6 +283,40 @@ fn serve(
     let mut session = Session::new(slot, &setup, learner, out)?;
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
+    let flown = fly(&ports, &mut session, first, nonce, &faults, world_timeout, trace.as_mut());
+    let Err(error) = flown else { return Ok(()) };
+    // Whatever ended the flight early (a termination request, the world gone or its verdict
+    // that this agent is dead), what it learned is kept: a restart or `--resume` goes on
+    // from there.
+    if let Err(not_saved) = session.save_all() {
+        bail!("{error:#}; and its Q-tables could not be saved: {not_saved:#}");
+    }
+    let dir = out.join("qtables");
+    if termination_requested() && ask != Ask::Own(slot) {
+        // An attached agent asked to leave (Ctrl-C): the world drops it once it is gone.
+        flockstep_proto::output::message(&format!(
+            "agent: UAV{} left run `{}`; its Q-tables are in {}",
+            slot + 1,
+            ports.run_id(),
+            dir.display()
+        ));
+        return Ok(());
+    }
+    bail!("{error:#}; its Q-tables are saved in {}", dir.display())
+}
+
+/// Answers every round from `first` (the round that admitted the agent) until the stop
+/// round, whose answer comes after the final snapshots are written.
+fn fly(
+    ports: &AgentPorts,
+    session: &mut Session,
+    first: ObservationSample,
+    nonce: u64,
+    faults: &[Fault],
+    world_timeout: Duration,
+    mut trace: Option<&mut Trace>,
+) -> Result<()> {
+    let slot = session.agent.slot();
     let mut next_round = first.round;
     let mut admission = Some(first);
     loop {
@@ -304,7 +340,7 @@ fn serve(
         if observation.slot_owners().get(slot) != Some(&nonce) {
             bail!("the world dropped UAV{} from the run (presumed dead)", slot + 1);
         }
-        for fault in &faults {
+        for fault in faults {
             match *fault {
                 Fault::CrashAtRound(r) if observation.round == r => std::process::abort(),
                 Fault::HangAtRound(r) if observation.round == r => hang(r),
@@ -319,7 +355,7 @@ fn serve(
             .agent
             .act(&observation, &mut action)
             .with_context(|| format!("round {}", observation.round))?;
-        if let Some(trace) = trace.as_mut() {
+        if let Some(trace) = trace.as_deref_mut() {
             trace.record(&observation, &action, &session.agent)?;
         }
         if observation.kind == ObservationKind::Stop as u8 {
@@ -327,7 +363,7 @@ fn serve(
             action.send()?;
             return Ok(());
         }
-        session.save_periodic()?;
+        session.save_due()?;
         action.send()?;
     }
 }
@@ -465,6 +501,11 @@ impl Session {
         };
         let mut agent = UavAgent::new(&spec)?;
         if let Some(dir) = &learner.resume {
+            // A directory without a trial's snapshot is normal (a restart before the first
+            // one); a directory that is not there is a mistake, not a fresh start.
+            if !dir.is_dir() {
+                bail!("--resume {}: no such directory", dir.display());
+            }
             // A restart before the first periodic snapshot starts those trials afresh.
             for trial in restore_snapshots(&mut agent, dir, scenario.name(), comm, &tree_text)? {
                 tracing::warn!(trial, "no snapshot for this trial: it starts from scratch");
@@ -487,13 +528,15 @@ impl Session {
             .with_context(|| format!("saving the Q-tables of UAV{}", self.agent.slot() + 1))
     }
 
-    /// Saves a trial's tables once it has trained `snapshot_every` more episodes.
-    fn save_periodic(&mut self) -> Result<()> {
-        if self.snapshot_every == 0 {
-            return Ok(());
-        }
+    /// Saves a trial's tables once it has trained `snapshot_every` more episodes (0: never
+    /// for that reason), and whenever its training pauses or ends with episodes not yet
+    /// saved (a greedy evaluation starts, the trial is done): a failure in the final
+    /// evaluation, which can take long, then loses nothing learned.
+    fn save_due(&mut self) -> Result<()> {
         for (trial, part) in self.agent.trials().iter().enumerate() {
-            if part.trained_episodes() < self.saved[trial] + self.snapshot_every {
+            let unsaved = part.trained_episodes() - self.saved[trial];
+            let due = self.snapshot_every > 0 && unsaved >= self.snapshot_every;
+            if !due && (unsaved == 0 || part.is_training()) {
                 continue;
             }
             self.saved[trial] = part.trained_episodes();

@@ -99,6 +99,10 @@ pub enum SignalMode {
     /// is ignored: a terminal's Ctrl-C reaches the whole process group, and only the supervisor
     /// may turn it into an orderly stop at the same round for everyone.
     Supervised,
+    /// An agent a user started in a terminal (`agent --attach`): Ctrl-C (SIGINT) and SIGTERM
+    /// are both latched as in [`SignalMode::Supervised`], so either makes it leave the run
+    /// at its next wait, its tables saved.
+    Interactive,
     /// Signals are left as they are: the process owns them (the supervisor with `ctrlc`,
     /// tests, the benchmark's parent).
     Untouched,
@@ -164,8 +168,8 @@ impl RunNode {
     /// removes the resources of dead nodes of the same run.
     pub fn new(run: &RunConfig) -> Result<RunNode, TransportError> {
         let config = iceoryx_config(&run.run_id)?;
-        if run.signals == SignalMode::Supervised {
-            install_supervised_signals()?;
+        if run.signals != SignalMode::Untouched {
+            install_termination_signals(run.signals)?;
         }
         // Armed before the node exists, so a failure further on still cleans up.
         let last_out = LastOut::new(&run.run_id);
@@ -188,7 +192,9 @@ extern "C" fn latch_termination(_: libc::c_int) {
     TERMINATION.store(true, Ordering::Relaxed);
 }
 
-fn install_supervised_signals() -> Result<(), TransportError> {
+/// Latches SIGTERM, and SIGINT too in [`SignalMode::Interactive`] (ignored otherwise: see
+/// [`SignalMode::Supervised`]).
+fn install_termination_signals(mode: SignalMode) -> Result<(), TransportError> {
     // SAFETY: `sigaction` with a zeroed, then filled, struct; the handler only stores to an
     // atomic, which is async-signal-safe.
     let failed = unsafe {
@@ -200,19 +206,21 @@ fn install_supervised_signals() -> Result<(), TransportError> {
         let mut ignore: libc::sigaction = std::mem::zeroed();
         ignore.sa_sigaction = libc::SIG_IGN;
         libc::sigemptyset(&mut ignore.sa_mask);
+        let int = if mode == SignalMode::Interactive { &term } else { &ignore };
         libc::sigaction(libc::SIGTERM, &term, std::ptr::null_mut()) != 0
-            || libc::sigaction(libc::SIGINT, &ignore, std::ptr::null_mut()) != 0
+            || libc::sigaction(libc::SIGINT, int, std::ptr::null_mut()) != 0
     };
     if failed {
         return Err(TransportError::Io {
-            what: "installing the SIGTERM handler".into(),
+            what: "installing the SIGTERM and SIGINT handlers".into(),
             source: std::io::Error::last_os_error(),
         });
     }
     Ok(())
 }
 
-/// True once a [`SignalMode::Supervised`] process received SIGTERM.
+/// True once a [`SignalMode::Supervised`] or [`SignalMode::Interactive`] process received a
+/// signal it latches.
 pub fn termination_requested() -> bool {
     TERMINATION.load(Ordering::Relaxed)
 }

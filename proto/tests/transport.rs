@@ -231,8 +231,13 @@ fn child_process() {
     };
     let parent: u32 = std::env::var("FLOCKSTEP_TEST_PARENT").unwrap().parse().unwrap();
     flockstep_proto::transport::exit_with_parent(parent).unwrap();
-    let signals =
-        if role.starts_with("supervised") { SignalMode::Supervised } else { SignalMode::Untouched };
+    let signals = if role.starts_with("supervised") {
+        SignalMode::Supervised
+    } else if role.starts_with("interactive") {
+        SignalMode::Interactive
+    } else {
+        SignalMode::Untouched
+    };
     let mut config = RunConfig::new(run_id, signals);
     config.open_timeout = BOUND;
     if role.ends_with("signals") {
@@ -361,9 +366,10 @@ fn signal_masks(role: &str) -> (u64, u64) {
 /// iceoryx2 installs, by default, a handler that only latches SIGINT, SIGTERM, SIGTSTP and
 /// ten more (docs/TRANSPORT.md, traps): Ctrl-Z would stop working and SIGTERM no longer
 /// terminate. The transport disables it: a run's ports and waits change no signal unless the
-/// process is supervised, which catches SIGTERM and ignores SIGINT, and nothing else.
+/// process is supervised, which catches SIGTERM and ignores SIGINT, or interactive (an
+/// attached agent), which catches both; and nothing else.
 #[test]
-fn ports_and_waits_take_no_signal_unless_the_process_is_supervised() {
+fn ports_and_waits_take_only_the_signals_their_mode_names() {
     let bit = |signal: libc::c_int| 1u64 << (signal - 1);
     let iceoryx2_defaults = [
         libc::SIGINT,
@@ -388,6 +394,10 @@ fn ports_and_waits_take_no_signal_unless_the_process_is_supervised() {
     let (caught, ignored) = signal_masks("supervised-signals");
     assert_eq!(caught & iceoryx2_defaults, bit(libc::SIGTERM), "caught: {caught:x}");
     assert_eq!(ignored & iceoryx2_defaults, bit(libc::SIGINT), "ignored: {ignored:x}");
+    let (caught, ignored) = signal_masks("interactive-signals");
+    let both = bit(libc::SIGINT) | bit(libc::SIGTERM);
+    assert_eq!(caught & iceoryx2_defaults, both, "caught: {caught:x}");
+    assert_eq!(ignored & iceoryx2_defaults, 0, "ignored: {ignored:x}");
 }
 
 #[test]

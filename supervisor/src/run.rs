@@ -52,6 +52,10 @@ fn vm_hwm_kib(status: &str) -> Option<u64> {
 }
 
 pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> {
+    if config.transport == Transport::Shm {
+        // Before anything is written or started: this run would read the other's records.
+        crate::shm::refuse_run_id_in_use(&config.run_id)?;
+    }
     prepare_out_dir(config)?;
     let e = &config.episodes;
     let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
@@ -78,10 +82,16 @@ pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> 
     outcome.peak_rss_kib.insert(0, ("supervisor".to_string(), own_peak_rss_kib()));
     let error = result.as_ref().err().map(|e| format!("{e:#}"));
     let written = write_results(config, &recorder, wall, &outcome, error.as_deref());
-    let outcome = result?;
-    finished?;
-    written?;
-    Ok(outcome)
+    // One error line: what failed the run, and what could not be written of its results.
+    let unwritten = [finished.err(), written.err()].into_iter().flatten().next();
+    match (result, unwritten) {
+        (Ok(outcome), None) => Ok(outcome),
+        (Ok(_), Some(unwritten)) => Err(unwritten),
+        (Err(failed), None) => Err(failed),
+        (Err(failed), Some(unwritten)) => {
+            Err(anyhow::anyhow!("{failed:#}; and its results could not be written: {unwritten:#}"))
+        }
+    }
 }
 
 /// Creates the results directory (removing an earlier run's results there if asked to) and

@@ -24,6 +24,7 @@ use flockstep_proto::transport::{
     cleanup_run, sweep_stale_runs, FromWorld, RunConfig as RunIdentity, RunServices, SignalMode,
     SupervisorPorts, TransportError,
 };
+use flockstep_proto::{Membership, MAX_AGENTS};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -50,7 +51,13 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         create_trace_files(dir, config.uavs)?;
     }
     let world = Process::spawn("world", world_command(config)?, &logs.join("world.log"))?;
-    let mut fleet = Fleet { config, world, agents: Vec::new(), restarts: vec![0; config.uavs] };
+    let mut fleet = Fleet {
+        config,
+        world,
+        agents: Vec::new(),
+        restarts: vec![0; config.uavs],
+        membership: Membership::default(),
+    };
     let result = open_ports(config, &mut fleet.world).and_then(|ports| {
         for slot in 0..config.uavs {
             fleet.spawn_agent(slot, false)?;
@@ -73,6 +80,17 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         recorder.note(format!("had to signal {} to stop", forced.join(", ")));
     }
     Ok(outcome)
+}
+
+/// Refuses a run id that a live run uses (`--run-id` given twice): this run's world would
+/// fail to create its services, after its supervisor had opened the other run's. The dead
+/// nodes of a crashed run of that id are removed on the way.
+pub fn refuse_run_id_in_use(run_id: &str) -> Result<()> {
+    let found = cleanup_run(run_id).with_context(|| format!("looking for a run `{run_id}`"))?;
+    if found.live_nodes > 0 {
+        bail!("--run-id {run_id}: a live run uses this id; choose another");
+    }
+    Ok(())
 }
 
 /// Says which run this is and, if the scenario has routes no agent was started for, how
@@ -105,6 +123,8 @@ struct Fleet<'a> {
     /// Every agent process started, restarts included, in the order they were started.
     agents: Vec<AgentProcess>,
     restarts: Vec<u32>,
+    /// The barrier's membership as the world last told it.
+    membership: Membership,
 }
 
 /// An agent process the supervisor started, and what it knows of it.
@@ -172,6 +192,15 @@ impl Fleet<'_> {
                         let held = membership.holds(agent.slot, agent.process.pid());
                         agent.seat = agent.seat.after(held);
                     }
+                    let own = |pid| self.agents.iter().any(|a| a.process.pid() == pid);
+                    let (came, left) = attached_changes(&self.membership, &membership, own);
+                    for (slot, pid) in came {
+                        recorder.say(&format!("UAV{} attached (process {pid})", slot + 1));
+                    }
+                    for (slot, pid) in left {
+                        recorder.note(format!("UAV{} (attached, process {pid}) left", slot + 1));
+                    }
+                    self.membership = membership;
                 }
             }
         }
@@ -304,6 +333,29 @@ impl Fleet<'_> {
         }
         Ok(failed)
     }
+}
+
+/// The agents that attached and those that left between memberships `before` and `after`,
+/// as (slot, process id): every process that held a slot and is not one of the supervisor's
+/// own (`own`).
+fn attached_changes(
+    before: &Membership,
+    after: &Membership,
+    own: impl Fn(u32) -> bool,
+) -> (Vec<(usize, u32)>, Vec<(usize, u32)>) {
+    let holder = |m: &Membership, slot: usize| {
+        let pid = m.pids[slot];
+        (m.live >> slot & 1 == 1 && pid != 0 && !own(pid)).then_some(pid)
+    };
+    let (mut came, mut left) = (Vec::new(), Vec::new());
+    for slot in 0..MAX_AGENTS {
+        let (was, is) = (holder(before, slot), holder(after, slot));
+        if was != is {
+            left.extend(was.map(|pid| (slot, pid)));
+            came.extend(is.map(|pid| (slot, pid)));
+        }
+    }
+    (came, left)
 }
 
 /// What a restart of agent `slot` goes on from: its latest snapshots in `--out`, read as the
@@ -451,7 +503,34 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
 
 #[cfg(test)]
 mod tests {
-    use super::Seat;
+    use super::{attached_changes, Seat};
+    use flockstep_proto::Membership;
+
+    /// A membership of `(slot, pid)`s.
+    fn members(held: &[(usize, u32)]) -> Membership {
+        let mut membership = Membership::default();
+        for &(slot, pid) in held {
+            membership.live |= 1 << slot;
+            membership.pids[slot] = pid;
+        }
+        membership
+    }
+
+    #[test]
+    fn attached_agents_are_told_apart_from_the_supervisors_own_as_they_come_and_go() {
+        let own = |pid| pid == 11 || pid == 12;
+        let start = members(&[(0, 11), (1, 12)]);
+        let attached = members(&[(0, 11), (1, 12), (2, 30)]);
+        assert_eq!(attached_changes(&start, &attached, own), (vec![(2, 30)], vec![]));
+        // The attached agent leaves; the own agent of slot 0 is dropped: not an attached one.
+        let after = members(&[(1, 12)]);
+        assert_eq!(attached_changes(&attached, &after, own), (vec![], vec![(2, 30)]));
+        // Another process takes an own agent's route while its restart waits.
+        let taken = members(&[(0, 31), (1, 12)]);
+        assert_eq!(attached_changes(&after, &taken, own), (vec![(0, 31)], vec![]));
+        let swapped = members(&[(0, 32), (1, 12)]);
+        assert_eq!(attached_changes(&taken, &swapped, own), (vec![(0, 32)], vec![(0, 31)]));
+    }
 
     /// Where a process that starts waiting stands after changes of membership that name it
     /// (`true`) or not (`false`) in turn.
