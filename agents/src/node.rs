@@ -20,8 +20,8 @@ use crate::uav::load_uav_tree;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
-    exit_with_parent, termination_requested, AgentPorts, ObservationSample, RunConfig, RunServices,
-    SignalMode, TransportError,
+    exit_with_parent, termination_requested, ActionLoan, AgentPorts, ObservationSample, RunConfig,
+    RunServices, SignalMode, TransportError,
 };
 use flockstep_proto::{
     FieldError, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -284,7 +284,15 @@ fn serve(
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
     let flown = fly(&ports, &mut session, first, nonce, &faults, world_timeout, trace.as_mut());
-    let Err(error) = flown else { return Ok(()) };
+    let error = match flown {
+        // The stop round is answered once the final tables are on disk: the world takes no
+        // answer for a sign they are lost.
+        Ok(stop_answer) => {
+            session.save_all()?;
+            return Ok(stop_answer.send()?);
+        }
+        Err(error) => error,
+    };
     // Whatever ended the flight early (a termination request, the world gone or its verdict
     // that this agent is dead), what it learned is kept: a restart or `--resume` goes on
     // from there.
@@ -305,17 +313,17 @@ fn serve(
     bail!("{error:#}; its Q-tables are saved in {}", dir.display())
 }
 
-/// Answers every round from `first` (the round that admitted the agent) until the stop
-/// round, whose answer comes after the final snapshots are written.
-fn fly(
-    ports: &AgentPorts,
+/// Answers every round from `first` (the round that admitted the agent) up to the stop
+/// round, whose answer it returns unsent: it goes out once the final snapshots are written.
+fn fly<'a>(
+    ports: &'a AgentPorts,
     session: &mut Session,
     first: ObservationSample,
     nonce: u64,
     faults: &[Fault],
     world_timeout: Duration,
     mut trace: Option<&mut Trace>,
-) -> Result<()> {
+) -> Result<ActionLoan<'a>> {
     let slot = session.agent.slot();
     let mut next_round = first.round;
     let mut admission = Some(first);
@@ -359,11 +367,9 @@ fn fly(
             trace.record(&observation, &action, &session.agent)?;
         }
         if observation.kind == ObservationKind::Stop as u8 {
-            session.save_all()?;
-            action.send()?;
-            return Ok(());
+            return Ok(action);
         }
-        session.save_due()?;
+        session.save_due();
         action.send()?;
     }
 }
@@ -531,8 +537,10 @@ impl Session {
     /// Saves a trial's tables once it has trained `snapshot_every` more episodes (0: never
     /// for that reason), and whenever its training pauses or ends with episodes not yet
     /// saved (a greedy evaluation starts, the trial is done): a failure in the final
-    /// evaluation, which can take long, then loses nothing learned.
-    fn save_due(&mut self) -> Result<()> {
+    /// evaluation, which can take long, then loses nothing learned. A snapshot that cannot
+    /// be written is logged and tried again at the next occasion: the agent flies on, and
+    /// only the final tables, which the stop round waits for, decide the run.
+    fn save_due(&mut self) {
         for (trial, part) in self.agent.trials().iter().enumerate() {
             let unsaved = part.trained_episodes() - self.saved[trial];
             let due = self.snapshot_every > 0 && unsaved >= self.snapshot_every;
@@ -540,9 +548,12 @@ impl Session {
                 continue;
             }
             self.saved[trial] = part.trained_episodes();
-            write_snapshot(part, &self.out, trial, &self.scenario, self.comm, &self.tree_text)?;
+            let written =
+                write_snapshot(part, &self.out, trial, &self.scenario, self.comm, &self.tree_text);
+            if let Err(e) = written {
+                tracing::warn!(trial, "snapshot not saved, the agent flies on: {e}");
+            }
         }
-        Ok(())
     }
 }
 

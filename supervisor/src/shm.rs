@@ -86,8 +86,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
 /// fail to create its services, after its supervisor had opened the other run's. The dead
 /// nodes of a crashed run of that id are removed on the way.
 pub fn refuse_run_id_in_use(run_id: &str) -> Result<()> {
-    let found = cleanup_run(run_id).with_context(|| format!("looking for a run `{run_id}`"))?;
-    if found.live_nodes > 0 {
+    if RunServices::is_served(run_id)? {
         bail!("--run-id {run_id}: a live run uses this id; choose another");
     }
     Ok(())

@@ -2,8 +2,7 @@
 //! and the agent exits at once saying it, while the run goes on.
 
 use crate::harness::{
-    assert_nothing_left, catches, pids_with, run_id, scratch, signal, wait_until, world_log,
-    Spawned, AGENT, SUPERVISOR,
+    assert_nothing_left, run_id, scratch, wait_for_agent, world_log, Spawned, AGENT, SUPERVISOR,
 };
 use std::time::{Duration, Instant};
 
@@ -42,9 +41,8 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
             "1",
         ],
     );
-    wait_until("the run's agents", Duration::from_secs(30), || {
-        !pids_with(&format!("--run-id {id} --uav 2")).is_empty()
-    });
+    // Both routes are taken once the last starting agent runs.
+    wait_for_agent(&id, 2);
     let cases = [
         (vec!["--uav", "9"], format!("--uav 9: run `{id}` has 2 routes")),
         (vec!["--uav", "2"], format!("--uav 2: route 2 of run `{id}` is taken by another agent")),
@@ -65,10 +63,7 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
         assert_eq!(stderr.trim(), format!("agent: error: {expected}"), "\n{report}");
         assert!(waited < AT_ONCE, "the refused agent took {waited:?} to exit\n{report}");
     }
-    wait_until("the supervisor to handle SIGINT", Duration::from_secs(30), || {
-        catches(run.pid(), libc::SIGINT)
-    });
-    signal(run.pid(), libc::SIGINT);
+    run.interrupt();
     let (status, report) = run.finish(BOUND);
     assert_eq!(status.status.code(), Some(130), "the run ends only on Ctrl-C\n{report}");
     let log = world_log(dir.path());
@@ -85,18 +80,22 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
 fn attaching_to_a_run_that_is_not_running_waits_the_world_timeout() {
     let dir = scratch();
     let (id, out) = (run_id("absent"), dir.path().display().to_string());
-    let args = ["--attach", id.as_str(), "--out", out.as_str(), "--world-timeout-ms", "300"];
+    let timeout = Duration::from_millis(300);
+    let timeout_ms = timeout.as_millis().to_string();
+    let args = ["--attach", &id, "--out", &out, "--world-timeout-ms", &timeout_ms];
     let started = Instant::now();
     let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
     let waited = started.elapsed();
     assert!(!output.status.success(), "expected a failure\n{report}");
     let stderr = String::from_utf8_lossy(&output.stderr);
     let expected = format!(
-        "agent: error: run `{id}`: not running: no world created its services within 300ms \
-         (--world-timeout-ms)"
+        "agent: error: run `{id}`: not running: no world created its services \
+         within {timeout_ms}ms (--world-timeout-ms)"
     );
     assert_eq!(stderr.trim(), expected, "\n{report}");
-    // 300 ms and the process's start, far below the old fixed 10 s even on a loaded machine.
+    // It waited the timeout it was given (`waited` also holds the process's start)...
+    assert!(waited >= timeout, "the agent gave up after {waited:?}, before {timeout:?}\n{report}");
+    // ... and not the old fixed 10 s: 300 ms and a start, far below that even when loaded.
     assert!(waited < Duration::from_secs(5), "the agent took {waited:?} to give up\n{report}");
     assert_nothing_left(&id);
 }

@@ -151,6 +151,28 @@ pub fn pids_with(needle: &str) -> Vec<u32> {
     pids
 }
 
+/// Pids of the processes of agent `uav` (1-based) of run `id`, as the supervisor starts
+/// them (`agent run --run-id ID --uav N ...`; the trailing space keeps UAV1 from matching
+/// UAV10).
+pub fn agent_pids(id: &str, uav: usize) -> Vec<u32> {
+    pids_with(&format!("--run-id {id} --uav {uav} "))
+}
+
+/// Waits (at most 30 s) until agent `uav` of run `id` has a process; returns its pids.
+pub fn wait_for_agent(id: &str, uav: usize) -> Vec<u32> {
+    let mut pids = Vec::new();
+    wait_until(&format!("UAV{uav} of run {id} to start"), Duration::from_secs(30), || {
+        pids = agent_pids(id, uav);
+        !pids.is_empty()
+    });
+    pids
+}
+
+/// Pids of the world process of run `id` (`supervisor world --run-id ID ...`).
+pub fn world_pids(id: &str) -> Vec<u32> {
+    pids_with(&format!("world --run-id {id} "))
+}
+
 /// Sends `signal` to `pid`.
 pub fn signal(pid: u32, signal: libc::c_int) {
     // SAFETY: kill(2) with a pid we found; a process already gone is not an error here.
@@ -170,6 +192,33 @@ pub fn catches(pid: u32, signal: libc::c_int) -> bool {
         .is_some_and(|mask| mask & (1 << (signal - 1)) != 0)
 }
 
+/// Pids of the descendants of `pid` (its children, theirs, and so on), from the parent pid
+/// in each `/proc/<pid>/stat`.
+fn descendants(pid: u32) -> Vec<u32> {
+    let mut parent_of = Vec::new();
+    for entry in std::fs::read_dir("/proc").expect("/proc is readable").flatten() {
+        let Ok(child) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else { continue };
+        // `pid (comm) state ppid ...`: comm may hold spaces and parentheses, so the fields
+        // are counted from its closing parenthesis.
+        let ppid = stat
+            .rfind(')')
+            .and_then(|end| stat[end + 1..].split_whitespace().nth(1))
+            .and_then(|ppid| ppid.parse::<u32>().ok());
+        if let Some(ppid) = ppid {
+            parent_of.push((child, ppid));
+        }
+    }
+    let (mut found, mut parents) = (Vec::new(), vec![pid]);
+    while let Some(parent) = parents.pop() {
+        for &(child, _) in parent_of.iter().filter(|&&(_, ppid)| ppid == parent) {
+            found.push(child);
+            parents.push(child);
+        }
+    }
+    found
+}
+
 /// Polls `condition` every 10 ms for at most `timeout`; panics with `what` if it never holds.
 pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> bool) {
     let start = Instant::now();
@@ -185,17 +234,24 @@ pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> 
 pub struct Spawned {
     pub cmd: Command,
     child: Child,
-    /// The output readers, taken when the process has exited.
-    readers: Option<[JoinHandle<Vec<u8>>; 2]>,
+    /// The output readers (of the piped outputs), taken when the process has exited.
+    readers: Option<[Option<JoinHandle<Vec<u8>>>; 2]>,
 }
 
 impl Spawned {
+    /// Starts `program args` with its stdout and stderr collected.
     pub fn start(program: &str, args: &[&str]) -> Spawned {
         let mut cmd = Command::new(program);
         cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
-        let mut child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
-        let stdout = drain(child.stdout.take().expect("a piped stdout"));
-        let stderr = drain(child.stderr.take().expect("a piped stderr"));
+        Spawned::spawn(cmd)
+    }
+
+    /// Starts `cmd` as it is set up: an output it pipes is collected, one it sends elsewhere
+    /// (a file, `/dev/full`) reads as empty.
+    pub fn spawn(mut cmd: Command) -> Spawned {
+        let mut child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start {cmd:?}: {e}"));
+        let stdout = child.stdout.take().map(drain);
+        let stderr = child.stderr.take().map(drain);
         Spawned { cmd, child, readers: Some([stdout, stderr]) }
     }
 
@@ -205,6 +261,16 @@ impl Spawned {
 
     pub fn pid(&self) -> u32 {
         self.child.id()
+    }
+
+    /// Sends SIGINT, as Ctrl-C does, once the process has its handler for it (at most 30 s):
+    /// before that, the signal's default action would kill it, which tests nothing.
+    pub fn interrupt(&self) {
+        let pid = self.pid();
+        wait_until(&format!("process {pid} to handle SIGINT"), Duration::from_secs(30), || {
+            catches(pid, libc::SIGINT)
+        });
+        signal(pid, libc::SIGINT);
     }
 
     /// Waits for the exit, at most `timeout`; fails the test past it (see [`Self::try_finish`]).
@@ -223,16 +289,30 @@ impl Spawned {
         signal(self.pid(), libc::SIGINT);
         let (status, then) = match self.exited_within(INTERRUPT_GRACE) {
             Some(status) => (status, "it stopped on SIGINT"),
-            None => {
-                let _ = self.child.kill();
-                (self.child.wait().expect("wait on the killed process"), "SIGINT did not stop it")
-            }
+            None => (self.kill_tree(), "SIGINT did not stop it"),
         };
         let progress = self.progress();
         let (_, report) = self.output(status);
         Err(format!(
             "the process did not finish within {timeout:?}; then {then}\n{report}\n{progress}"
         ))
+    }
+
+    /// SIGKILLs the running process and every process under it; returns its exit status.
+    /// The supervisor's children run in process groups of their own and, when it dies, get
+    /// only SIGTERM (their parent-death signal): an agent that ignores SIGTERM (`--fault
+    /// N=ignore-sigterm`) would outlive a failed test. The process is stopped first, so that
+    /// it starts no new child while its descendants are listed, and they are listed while
+    /// they are still its children (an orphan's parent is init).
+    fn kill_tree(&mut self) -> ExitStatus {
+        let pid = self.pid();
+        signal(pid, libc::SIGSTOP);
+        let descendants = descendants(pid);
+        let _ = self.child.kill();
+        for descendant in descendants {
+            signal(descendant, libc::SIGKILL);
+        }
+        self.child.wait().expect("wait on the killed process")
     }
 
     /// Polls every 10 ms for the exit, at most `timeout`.
@@ -253,7 +333,9 @@ impl Spawned {
     /// readers).
     fn output(&mut self, status: ExitStatus) -> (Output, String) {
         let [stdout, stderr] = self.readers.take().expect("the output is collected once");
-        let read = |reader: JoinHandle<Vec<u8>>| reader.join().expect("an output reader");
+        let read = |reader: Option<JoinHandle<Vec<u8>>>| {
+            reader.map_or_else(Vec::new, |reader| reader.join().expect("an output reader"))
+        };
         let out = Output { status, stdout: read(stdout), stderr: read(stderr) };
         let report = describe(&self.cmd, &out);
         (out, report)
@@ -283,8 +365,7 @@ impl Spawned {
 impl Drop for Spawned {
     fn drop(&mut self) {
         if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
+            self.kill_tree();
         }
     }
 }
@@ -321,6 +402,85 @@ pub fn episode_rows(out: &Path) -> Vec<[u64; 6]> {
         .collect()
 }
 
+/// Mean episode length (the `length` column) of `rows`, which must not be empty.
+pub fn mean_length(rows: &[[u64; 6]]) -> f64 {
+    assert!(!rows.is_empty(), "the mean episode length of no episodes");
+    rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64
+}
+
+/// Where one agent's rows (in episode order) first skip an episode: the index of the last
+/// row before the gap, e.g. where a killed agent was down until its restart.
+pub fn first_gap(rows: &[[u64; 6]]) -> Option<usize> {
+    rows.windows(2).position(|w| w[1][2] != w[0][2] + 1)
+}
+
+/// One line of an agent's trace (`agent run --trace FILE`, agents/src/trace.rs), which is
+/// written after the agent took in the round's relayed flags and chose its action.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TraceRow {
+    pub round: u64,
+    /// `tick`, or `stop` in the run's last round.
+    pub stop: bool,
+    pub trial: u64,
+    pub episode: u64,
+    pub episode_tick: u64,
+    /// The flags the agent sent this round: the waypoint (0-based) and whether it saw the
+    /// target from there.
+    pub sent_waypoint: usize,
+    pub sent_sees: u64,
+    /// Its communication words after taking in the flags relayed this round.
+    pub comm: Vec<u64>,
+}
+
+/// The rows of the trace at `path`, in file order.
+pub fn read_trace(path: &Path) -> Vec<TraceRow> {
+    let text = String::from_utf8(read(path)).expect("UTF-8 trace");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("round,kind,trial,episode,episode_tick,sent_waypoint,sent_sees,comm"),
+        "{} has another header",
+        path.display()
+    );
+    lines
+        .map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            assert_eq!(f.len(), 8, "malformed trace line `{line}` in {}", path.display());
+            let num = |i: usize| {
+                f[i].parse::<u64>().unwrap_or_else(|e| panic!("`{line}` field {i}: {e}"))
+            };
+            let stop = match f[1] {
+                "tick" => false,
+                "stop" => true,
+                kind => panic!("`{line}`: unknown kind `{kind}`"),
+            };
+            let comm = match f[7] {
+                "" => vec![],
+                words => words
+                    .split('-')
+                    .map(|w| u64::from_str_radix(w, 16).unwrap_or_else(|e| panic!("`{line}`: {e}")))
+                    .collect(),
+            };
+            TraceRow {
+                round: num(0),
+                stop,
+                trial: num(2),
+                episode: num(3),
+                episode_tick: num(4),
+                sent_waypoint: num(5) as usize,
+                sent_sees: num(6),
+                comm,
+            }
+        })
+        .collect()
+}
+
+/// Entry `k` of packed communication words (2 bits an entry: 0 unknown, 1 "0", 2 "1";
+/// agents/src/comm.rs).
+pub fn comm_entry(words: &[u64], k: usize) -> u64 {
+    words.get(2 * k / 64).map_or(0, |w| (w >> (2 * k % 64)) & 3)
+}
+
 /// Asserts that nothing of run `id` is left: no process, no shared-memory file.
 pub fn assert_nothing_left(id: &str) {
     wait_until(&format!("the processes of run {id} to exit"), Duration::from_secs(10), || {
@@ -328,4 +488,53 @@ pub fn assert_nothing_left(id: &str) {
     });
     let left = flockstep_proto::transport::leftover_files(id).expect("list the run's files");
     assert!(left.is_empty(), "run {id} left files behind: {left:?}");
+}
+
+/// The harness's own promise: a run a failing test drops takes every process it started
+/// down with it, even an agent that ignores SIGTERM (it used to outlive the test).
+#[test]
+fn a_dropped_run_takes_every_process_it_started_down() {
+    let dir = scratch();
+    let (id, out) = (run_id("dropped"), dir.path().display().to_string());
+    let run = Spawned::supervisor(
+        &[
+            &words("--transport shm --quiet --scenario s3 --uavs 2 --trials 1 --episodes 10000000")
+                [..],
+            &["--fault", "2=ignore-sigterm", "--run-id", &id, "--out", &out],
+        ]
+        .concat(),
+    );
+    let stubborn = wait_for_agent(&id, 2);
+    // Under way, not in the middle of setting up its shared memory.
+    wait_until("episodes to be recorded", Duration::from_secs(30), || {
+        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 100)
+    });
+    drop(run);
+    wait_until(
+        &format!(
+            "every process of run {id}, UAV2 (pids {stubborn:?}) that ignores SIGTERM too, to end"
+        ),
+        Duration::from_secs(10),
+        || pids_with(&id).is_empty(),
+    );
+    remove_killed_run(&id);
+}
+
+/// Removes the files of run `id`, whose processes were SIGKILLed and could not: its dead
+/// nodes as the supervisor removes a crashed run's, then what a concurrent sweep (every shm
+/// run another test starts sweeps dead nodes) may have left half-removed, with the node
+/// directory that held it once empty.
+fn remove_killed_run(id: &str) {
+    flockstep_proto::transport::cleanup_run(id).expect("remove the killed run's nodes");
+    let left = flockstep_proto::transport::leftover_files(id).expect("list the run's files");
+    for file in left {
+        std::fs::remove_file(&file).unwrap_or_else(|e| panic!("remove {}: {e}", file.display()));
+        let node_dir =
+            file.parent().filter(|dir| dir.parent().is_some_and(|p| p.ends_with("nodes")));
+        if let Some(dir) = node_dir {
+            // Fails, as it should, while other files are in it.
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
+    assert_nothing_left(id);
 }

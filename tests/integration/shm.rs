@@ -4,11 +4,12 @@
 //! process's own peak memory in the summary.
 
 use crate::harness::{
-    assert_same_file, read, run_id, scratch, supervise, words, Spawned, RUN_BOUND,
+    assert_nothing_left, assert_same_file, comm_entry, read, read_trace, run_id, scratch,
+    supervise, wait_until, words, world_pids, Spawned, TraceRow, RUN_BOUND,
 };
-use flockstep_proto::transport::leftover_files;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use std::time::Duration;
 
 /// Runs `args` with both transports; returns (shm dir, inproc dir).
 fn both(args: &[&str], tag: &str) -> (tempfile::TempDir, tempfile::TempDir) {
@@ -18,8 +19,7 @@ fn both(args: &[&str], tag: &str) -> (tempfile::TempDir, tempfile::TempDir) {
     shm_args.extend(["--transport", "shm", "--run-id", &id]);
     let summary = supervise(shm.path(), &shm_args);
     assert_eq!(summary["complete"], true, "{summary:#}");
-    let left = leftover_files(&id).expect("list the run's files");
-    assert!(left.is_empty(), "run {id} left shared-memory files behind: {left:?}");
+    assert_nothing_left(&id);
     let mut inproc_args = args.to_vec();
     inproc_args.extend(["--transport", "inproc"]);
     supervise(inproc.path(), &inproc_args);
@@ -78,35 +78,8 @@ fn s3_shm_and_inproc_are_byte_identical() {
     assert_transports_agree("s3", "2", "13");
 }
 
-/// One line of an agent's trace: (round, kind, trial) -> (episode, episode_tick, sent wp,
-/// sent sees, comm words).
-type Trace = BTreeMap<(u64, String, usize), (u64, u64, usize, u64, Vec<u64>)>;
-
-fn read_trace(path: &Path) -> Trace {
-    let text = String::from_utf8(read(path)).expect("UTF-8 trace");
-    let mut trace = Trace::new();
-    for line in text.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 8, "malformed trace line `{line}` in {}", path.display());
-        let num =
-            |i: usize| f[i].parse::<u64>().unwrap_or_else(|e| panic!("`{line}` field {i}: {e}"));
-        let comm = if f[7].is_empty() {
-            vec![]
-        } else {
-            f[7].split('-').map(|w| u64::from_str_radix(w, 16).expect("hex")).collect()
-        };
-        trace.insert(
-            (num(0), f[1].to_string(), num(2) as usize),
-            (num(3), num(4), num(5) as usize, num(6), comm),
-        );
-    }
-    trace
-}
-
-/// Entry `k` (2 bits: 0 unknown, 1 "0", 2 "1") of a packed communication vector.
-fn entry(words: &[u64], k: usize) -> u64 {
-    words.get(2 * k / 64).map_or(0, |w| (w >> (2 * k % 64)) & 3)
-}
+/// What the lockstep test runs: 2 trials.
+const LOCKSTEP_TRIALS: u64 = 2;
 
 #[test]
 fn lockstep_agents_tick_the_same_rounds_and_flags_arrive_the_next_tick() {
@@ -114,52 +87,82 @@ fn lockstep_agents_tick_the_same_rounds_and_flags_arrive_the_next_tick() {
     let traces = out.path().join("traces");
     std::fs::create_dir_all(&traces).expect("a trace directory");
     let id = run_id("lockstep");
-    let trace_arg = traces.display().to_string();
+    let (trace_arg, trials) = (traces.display().to_string(), LOCKSTEP_TRIALS.to_string());
     supervise(
         out.path(),
         &[
-            "--scenario",
-            "s3",
-            "--uavs",
-            "2",
-            "--episodes",
-            "300",
-            "--trials",
-            "2",
-            "--seed",
-            "21",
-            "--transport",
-            "shm",
-            "--run-id",
-            &id,
-            "--trace-dir",
-            &trace_arg,
-        ],
+            &words("--scenario s3 --uavs 2 --episodes 300 --seed 21 --transport shm")[..],
+            &["--trials", &trials, "--run-id", &id, "--trace-dir", &trace_arg],
+        ]
+        .concat(),
     );
+    assert_nothing_left(&id);
     let uav1 = read_trace(&traces.join("uav1.trace.csv"));
     let uav2 = read_trace(&traces.join("uav2.trace.csv"));
-    let keys = |t: &Trace| t.keys().cloned().collect::<Vec<_>>();
+    let keys = |t: &[TraceRow]| t.iter().map(|r| (r.round, r.stop, r.trial)).collect::<Vec<_>>();
     assert_eq!(keys(&uav1), keys(&uav2), "the two agents did not tick the same rounds");
-    let rounds: BTreeSet<u64> = uav1.keys().map(|(r, _, _)| *r).collect();
-    let last = *rounds.iter().max().expect("rounds");
+    let rounds: BTreeSet<u64> = uav1.iter().map(|r| r.round).collect();
+    let last = *rounds.last().expect("rounds");
     assert_eq!(rounds, (0..=last).collect(), "rounds are not consecutive from 0");
-    assert!(
-        uav1.keys().filter(|(_, kind, _)| kind == "stop").all(|(r, _, _)| *r == last),
-        "the run did not stop for everyone at the last round"
-    );
-    // Every flag UAV2 sent at tick t is in UAV1's state at tick t+1 of the same episode
-    // (UAV1's vector for UAV2 is entries 0..5), and vice versa (UAV2's vector for UAV1).
-    let mut checked = 0;
-    for (sender, receiver) in [(&uav2, &uav1), (&uav1, &uav2)] {
-        for ((round, kind, trial), (episode, tick, wp, sees, _)) in sender.iter() {
-            let next = (round + 1, "tick".to_string(), *trial);
-            let Some((next_episode, next_tick, _, _, comm)) = receiver.get(&next) else { continue };
-            if kind != "tick" || next_episode != episode || *next_tick != tick + 1 {
-                continue;
-            }
-            assert!(entry(comm, *wp) > *sees, "round {round} trial {trial}: flag (wp{}, {sees}) is not in the receiver's state at the next tick", wp + 1);
-            checked += 1;
+    // The run ended for everyone at once: one stop row per trial and UAV, all in the last
+    // round.
+    for (name, trace) in [("UAV1", &uav1), ("UAV2", &uav2)] {
+        for trial in 0..LOCKSTEP_TRIALS {
+            let stops: Vec<u64> =
+                trace.iter().filter(|r| r.stop && r.trial == trial).map(|r| r.round).collect();
+            assert_eq!(stops, [last], "{name} trial {trial}: stop rounds (the last is {last})");
         }
+        let trials: BTreeSet<u64> = trace.iter().map(|r| r.trial).collect();
+        assert_eq!(trials, (0..LOCKSTEP_TRIALS).collect(), "{name}: trials in the trace");
+    }
+    // A flag sent in round t is in the receiver's state in round t+1, never later and never
+    // earlier. Each agent's vector holds the other's entries alone (from entry 0).
+    let mut checked = 0;
+    for (sender, receiver, name) in [(&uav2, &uav1, "UAV2 -> UAV1"), (&uav1, &uav2, "UAV1 -> UAV2")]
+    {
+        let ticks = |trace: &[TraceRow]| -> BTreeMap<(u64, u64), TraceRow> {
+            let rows = trace.iter().filter(|r| !r.stop).map(|r| ((r.round, r.trial), r.clone()));
+            rows.collect()
+        };
+        let (sent, heard) = (ticks(sender), ticks(receiver));
+        let mut arrived_here = 0;
+        for (&(round, trial), flag) in &sent {
+            let at = |round| heard.get(&(round, trial));
+            let (Some(before), Some(after)) = (at(round), at(round + 1)) else { continue };
+            assert_eq!(
+                (before.episode, before.episode_tick),
+                (flag.episode, flag.episode_tick),
+                "{name} round {round} trial {trial}: the agents are in different ticks"
+            );
+            if after.episode != flag.episode || after.episode_tick != flag.episode_tick + 1 {
+                continue; // the episode ended: the next one starts knowing nothing
+            }
+            let (wp, value) = (flag.sent_waypoint, flag.sent_sees + 1);
+            let (was, is) = (comm_entry(&before.comm, wp), comm_entry(&after.comm, wp));
+            let context = format!(
+                "{name} round {round} trial {trial}: flag (wp{}, sees {}); the entry was {was}, \
+                 next round {is}",
+                wp + 1,
+                flag.sent_sees
+            );
+            // By t+1: entries only rise within an episode, to the highest value heard.
+            assert!(is >= value, "{context}: not in the receiver's state the next round");
+            // Not later than t+1 either: whatever rose from t to t+1 is this flag.
+            for k in 0..32 * after.comm.len() {
+                let (from, to) = (comm_entry(&before.comm, k), comm_entry(&after.comm, k));
+                assert!(
+                    to <= from || (k, to) == (wp, value),
+                    "{context}: entry {k} rose from {from} to {to}, which round {round} did \
+                     not send"
+                );
+            }
+            checked += 1;
+            if was < value {
+                arrived_here += 1;
+            }
+        }
+        // The flags that told the receiver something new are what shows the timing.
+        assert!(arrived_here > 0, "{name}: no flag told the receiver anything new");
     }
     assert!(checked > 1000, "only {checked} flags checked");
 }
@@ -181,15 +184,19 @@ fn two_simultaneous_runs_stay_independent() {
             Spawned::supervisor(&args)
         })
         .collect();
+    // Simultaneous: at one moment both worlds run (each run takes seconds; 60 s is a hang).
+    wait_until("both runs' worlds to run at once", Duration::from_secs(60), || {
+        ids.iter().all(|id| !world_pids(id).is_empty())
+    });
     for run in runs {
         let (out, report) = run.finish(RUN_BOUND);
         assert!(out.status.success(), "{report}");
     }
     for i in 0..2 {
+        assert_nothing_left(&ids[i]);
         let twin = scratch();
         supervise(twin.path(), &[&run(i)[..], &["--transport", "inproc"]].concat());
         assert_same_results(dirs[i].path(), twin.path());
-        assert!(leftover_files(&ids[i]).expect("list files").is_empty());
     }
     assert_ne!(
         read(&dirs[0].path().join("episodes.csv")),
@@ -220,6 +227,7 @@ fn each_process_reports_its_own_peak_memory_not_its_launchers() {
         ],
     );
     drop(ballast);
+    assert_nothing_left(&id);
     let peaks: BTreeMap<String, u64> = summary["peak_rss_kib"]
         .as_array()
         .expect("peak_rss_kib is a list")

@@ -2,8 +2,8 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    assert_nothing_left, catches, episode_rows, error_line, number, run_fail, run_id, run_ok,
-    scratch, signal, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
+    assert_nothing_left, episode_rows, error_line, first_gap, mean_length, number, run_fail,
+    run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::time::Duration;
@@ -45,9 +45,15 @@ fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
                 &out_arg,
             ],
         );
+        // The run's own greedy length, as `eval` prints it (two decimals, then the count of
+        // truncated episodes).
+        let expected = format!("UAV1 greedy episode length {greedy:.2} (");
         let text = String::from_utf8_lossy(&printed.stdout);
-        assert!(text.contains("UAV1 greedy episode length 13"), "{transport}: {text}");
+        assert!(text.starts_with(&expected), "{transport}: `{expected}` expected:\n{text}");
         let evaluated = summary(&out);
+        // `eval` takes no --run-id: its run id (of pid and time) is in its summary.
+        let id = evaluated["run_id"].as_str().expect("the evaluation's run id");
+        assert_nothing_left(id);
         assert_eq!(number(&evaluated, "greedy_episode_length", 0), greedy, "{transport}");
         assert_eq!(evaluated["episodes"], 0, "an evaluation does not train");
         assert!(episode_rows(&out).is_empty(), "an evaluation has no training episodes");
@@ -81,11 +87,8 @@ fn resume_continues_from_the_learned_level() {
     assert_eq!(resumed_run["resume"], absolute.display().to_string(), "{resumed_run:#}");
     let fresh = scratch();
     assert_eq!(supervise(fresh.path(), &continued)["resume"], serde_json::Value::Null);
-    let mean = |dir: &std::path::Path| {
-        let rows = episode_rows(dir);
-        rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64
-    };
-    let (resumed, scratch_mean) = (mean(second.path()), mean(fresh.path()));
+    let (resumed, scratch_mean) =
+        (mean_length(&episode_rows(second.path())), mean_length(&episode_rows(fresh.path())));
     assert!(
         resumed < 20.0 && resumed < scratch_mean / 2.0,
         "resumed {resumed} vs from scratch {scratch_mean}"
@@ -116,12 +119,10 @@ fn an_agent_restarted_before_its_first_snapshot_goes_on_from_the_resumed_tables(
     let uav1 = |dir: &std::path::Path| -> Vec<[u64; 6]> {
         episode_rows(dir).into_iter().filter(|r| r[1] == 1).collect()
     };
-    let mean =
-        |rows: &[[u64; 6]]| rows.iter().map(|r| r[4] as f64).sum::<f64>() / rows.len() as f64;
     let rows = uav1(second.path());
-    let gap =
-        rows.windows(2).position(|w| w[1][2] != w[0][2] + 1).expect("a gap where UAV1 was down");
-    let (untrained, after) = (mean(&uav1(first.path())[..200]), mean(&rows[gap + 1..]));
+    let gap = first_gap(&rows).expect("a gap where UAV1 was down");
+    let (untrained, after) =
+        (mean_length(&uav1(first.path())[..200]), mean_length(&rows[gap + 1..]));
     assert!(
         after < untrained / 2.0,
         "restarted from empty tables? untrained {untrained}, after the restart {after}"
@@ -221,10 +222,9 @@ fn an_evaluation_stopped_by_ctrl_c_exits_130_with_partial_results() {
     let eval = Spawned::supervisor(&["eval", "--qtables", &qtables, "--episodes", "100000000"]);
     let greedy = dir.path().join("eval").join("greedy_episodes.csv");
     wait_until("greedy episodes to be recorded", Duration::from_secs(60), || {
-        catches(eval.pid(), libc::SIGINT)
-            && std::fs::metadata(&greedy).is_ok_and(|m| m.len() > 1000)
+        std::fs::metadata(&greedy).is_ok_and(|m| m.len() > 1000)
     });
-    signal(eval.pid(), libc::SIGINT);
+    eval.interrupt();
     let (printed, report) = eval.finish(Duration::from_secs(120));
     assert_eq!(printed.status.code(), Some(130), "{report}");
     let stdout = String::from_utf8_lossy(&printed.stdout);

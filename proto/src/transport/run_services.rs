@@ -252,6 +252,21 @@ impl RunServices {
         &self.run.run_id
     }
 
+    /// Whether a live world serves `run_id`: the run's services exist once the resources of
+    /// its dead nodes are gone (a crashed world's go with them). Other processes that wait
+    /// for the run (an agent attaching before it starts) create none.
+    pub fn is_served(run_id: &str) -> Result<bool, TransportError> {
+        super::cleanup_run(run_id)?;
+        let config = super::iceoryx_config(run_id)?;
+        let name = service_name(run_id, OBSERVATIONS)?;
+        <Ipc as iceoryx2::service::Service>::does_exist(
+            &name,
+            &config,
+            iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+        )
+        .map_err(|e| setup(run_id, "looking for the run's services", e))
+    }
+
     /// Removes the resources of dead nodes of this run (a crashed agent's ports). Returns how
     /// many nodes were cleaned up.
     pub fn cleanup_dead_nodes(&self) -> u64 {
