@@ -375,6 +375,145 @@ fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     let s = summary(dir.path());
     assert_eq!(s["complete"], false);
     assert!(!episode_rows(dir.path()).is_empty(), "the results collected so far are lost");
+    // The agents, stopped with the world gone, saved what they had learned (long before
+    // their first periodic snapshot, due after 10 000 episodes).
+    for uav in 1..=2 {
+        for trial in 0..2 {
+            snapshot(dir.path(), uav, trial);
+        }
+        let log = String::from_utf8_lossy(&read(&dir.path().join(format!("logs/uav{uav}.log"))))
+            .into_owned();
+        assert!(log.contains("its Q-tables are saved in"), "UAV{uav}: {log}");
+    }
+    assert_nothing_left(&id);
+}
+
+/// The snapshot of agent `uav` (1-based) in `trial` under results directory `dir`.
+fn snapshot(
+    dir: &std::path::Path,
+    uav: usize,
+    trial: usize,
+) -> flockstep_agents::snapshot::Snapshot {
+    let path = dir.join("qtables").join(format!("uav{uav}_trial{trial}.bin"));
+    flockstep_agents::snapshot::Snapshot::decode(&read(&path))
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// An agent killed in the final greedy evaluation goes on, restarted, from the tables it
+/// trained: each trial saved them as its evaluation began. It used to restart from empty
+/// tables (no periodic snapshot was due yet), evaluate those, and write them as the final
+/// ones of a run that said it was complete.
+#[test]
+fn an_agent_killed_in_the_final_evaluation_is_restarted_with_its_trained_tables() {
+    let dir = scratch();
+    let (id, out) = (run_id("evalkill"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed 82 --eval-episodes 20000 --tick-cap 100 --restart on-failure"),
+    ));
+    let trained = |path: &std::path::Path| {
+        std::fs::read(path)
+            .ok()
+            .and_then(|b| flockstep_agents::snapshot::Snapshot::decode(&b).ok())
+            .is_some_and(|s| s.episodes == 1000)
+    };
+    let qtables = dir.path().join("qtables");
+    wait_until("UAV1's tables saved as each trial's evaluation began", DEADLOCK, || {
+        (0..2).all(|trial| trained(&qtables.join(format!("uav1_trial{trial}.bin"))))
+    });
+    for pid in agent_pids(&id, 1) {
+        signal(pid, libc::SIGKILL);
+    }
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let s = summary(dir.path());
+    let notes: Vec<&str> =
+        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    assert_eq!(notes.len(), 2, "one failure, one restart: {notes:?}");
+    assert_eq!(notes[1], "UAV1 restarted from its latest snapshot", "{notes:?}");
+    for trial in 0..2 {
+        assert_eq!(snapshot(dir.path(), 1, trial).episodes, 1000, "trial {trial}: {notes:?}");
+    }
+    assert_nothing_left(&id);
+}
+
+/// An attached agent leaves on Ctrl-C: it saves its tables, says so and exits 0; the world
+/// drops it and the run goes on; the supervisor notes that it left.
+#[test]
+fn an_attached_agent_leaves_on_ctrl_c_with_its_tables_saved() {
+    let (dir, own) = (scratch(), scratch());
+    let (id, out) = (run_id("leave"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s4 --uavs 2 --episodes 50000 --trials 2 --seed 42"),
+    ));
+    wait_for_agent(&id, 2);
+    let own_out = own.path().display().to_string();
+    let attached = Spawned::start(AGENT, &["--attach", &id, "--out", &own_out]);
+    // Rows as the supervisor's buffered writes have put them on disk so far.
+    let rows_of = |uav: &str| {
+        let csv = std::fs::read_to_string(dir.path().join("episodes.csv")).unwrap_or_default();
+        csv.lines().filter(|l| l.split(',').nth(1) == Some(uav)).count()
+    };
+    wait_until("UAV3 to fly episodes", DEADLOCK, || rows_of("3") > 100);
+    let pid = attached.pid();
+    attached.interrupt();
+    let (left, leave_report) = attached.finish(DEADLOCK);
+    assert!(left.status.success(), "{leave_report}");
+    let said = String::from_utf8_lossy(&left.stderr);
+    assert!(
+        said.contains(&format!(
+            "agent: UAV3 left run `{id}`; its Q-tables are in {own_out}/qtables"
+        )),
+        "{leave_report}"
+    );
+    for trial in 0..2 {
+        assert!(snapshot(own.path(), 3, trial).episodes > 0, "trial {trial}: {leave_report}");
+    }
+    // The run goes on without it, then is stopped.
+    let flown = rows_of("1");
+    wait_until("the run to go on", DEADLOCK, || rows_of("1") > flown + 1000);
+    run.interrupt();
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "{report}");
+    let notes = summary(dir.path())["notes"].to_string();
+    assert!(notes.contains(&format!("UAV3 (attached, process {pid}) left")), "{notes}");
+    assert_nothing_left(&id);
+}
+
+/// A second run with a live run's `--run-id` is refused before it writes or starts
+/// anything; the live run is not disturbed. It used to open the live run's records and fail
+/// with "episode records lost or out of order".
+#[test]
+fn a_run_id_a_live_run_uses_is_refused_at_once() {
+    let (dir, second) = (scratch(), scratch());
+    let (id, out) = (run_id("twice"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1 --seed 43"),
+    ));
+    wait_for_agent(&id, 2);
+    let second_out = second.path().join("b");
+    let (refused, report) = crate::harness::run_fail(
+        crate::harness::SUPERVISOR,
+        &[&["--run-id", &id, "--episodes", "10", "--out"][..], &[&*second_out.to_string_lossy()]]
+            .concat(),
+    );
+    assert_eq!(refused.status.code(), Some(1), "{report}");
+    let error = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(
+        error.trim_end(),
+        format!("supervisor: error: --run-id {id}: a live run uses this id; choose another"),
+        "{report}"
+    );
+    assert!(!second_out.exists(), "the refused run wrote {}", second_out.display());
+    run.interrupt();
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "{report}");
+    assert_eq!(summary(dir.path())["notes"], serde_json::json!([]), "{report}");
     assert_nothing_left(&id);
 }
 
