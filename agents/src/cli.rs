@@ -6,7 +6,7 @@ use crate::bt::render::render_ascii;
 use crate::bt::replay::{replay, OpenCatalog};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -76,16 +76,18 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
     }
 }
 
-fn read(path: &PathBuf) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+/// Reads a tree or script file, at most [`flockstep_world::map::MAX_INPUT_BYTES`] of it.
+fn read(path: &Path) -> Result<String> {
+    flockstep_world::map::read_input(path)
+        .with_context(|| format!("cannot read {}", path.display()))
 }
 
-fn show(path: &PathBuf) -> Result<()> {
+fn show(path: &Path) -> Result<()> {
     let tree = parse_tree(&path.display().to_string(), &read(path)?, &OpenCatalog::default())?;
     Ok(flockstep_proto::output::text(&render_ascii(&tree))?)
 }
 
-fn replay_files(tree_path: &PathBuf, script_path: &PathBuf, seed: u64) -> Result<()> {
+fn replay_files(tree_path: &Path, script_path: &Path, seed: u64) -> Result<()> {
     let catalog = OpenCatalog::default();
     let tree = parse_tree(&tree_path.display().to_string(), &read(tree_path)?, &catalog)?;
     let report =

@@ -57,8 +57,10 @@ pub enum SnapshotError {
     /// reports that follow the chain would print it twice.
     #[error("{path}: {cause}")]
     File { path: String, cause: Box<SnapshotError> },
-    #[error("cannot read {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    /// The I/O error is in the message, not also a `source` (a field named `source` is one
+    /// to thiserror): reports that follow the chain would print it twice.
+    #[error("cannot read {path}: {error}")]
+    Io { path: String, error: std::io::Error },
 }
 
 impl Snapshot {
@@ -281,7 +283,7 @@ pub fn read_snapshot(path: &Path) -> Result<Option<Snapshot>, SnapshotError> {
     let read = |path: &Path| match std::fs::read(path) {
         Ok(bytes) => Ok(Some(bytes)),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(SnapshotError::Io { path: path.display().to_string(), source }),
+        Err(error) => Err(SnapshotError::Io { path: path.display().to_string(), error }),
     };
     if let Some(bytes) = read(path)? {
         return Snapshot::decode(&bytes).map(Some).map_err(in_file(path));

@@ -40,14 +40,15 @@ impl LeafCatalog for UavCatalog {
     }
 }
 
-/// Reads and parses a UAV tree file, or the built-in Fig. 5 tree when `path` is None.
+/// Reads (at most [`flockstep_world::map::MAX_INPUT_BYTES`]) and parses a UAV tree file, or
+/// the built-in Fig. 5 tree when `path` is None.
 pub fn load_uav_tree(path: Option<&std::path::Path>) -> anyhow::Result<crate::bt::spec::TreeSpec> {
     use anyhow::Context;
     let (source, text) = match path {
         None => ("fig5.bt".to_string(), crate::FIG5_TREE.to_string()),
         Some(path) => (
             path.display().to_string(),
-            std::fs::read_to_string(path)
+            flockstep_world::map::read_input(path)
                 .with_context(|| format!("cannot read tree file {}", path.display()))?,
         ),
     };

@@ -127,6 +127,7 @@ pub enum Command {
         out: Option<PathBuf>,
         #[arg(long, default_value_t = 50_000)]
         episodes: u64,
+        /// Trials of each run; 1 to 16.
         #[arg(long, default_value_t = 4)]
         trials: usize,
         #[arg(long, default_value_t = 1)]
@@ -146,8 +147,12 @@ pub enum Command {
         /// Greedy episodes per trial (at least 1).
         #[arg(long, default_value_t = 1000)]
         episodes: u64,
+        /// Directory for the evaluation's results (summary.json, greedy_episodes.csv, ...)
+        /// [default: DIR/eval, DIR being --qtables].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// In-process by default; `shm` runs a world and agent processes, and is what
+        /// --agent-timeout-ms and --restart (before `eval`) apply to.
         #[arg(long, value_enum, default_value_t = Transport::Inproc)]
         transport: Transport,
         /// Replace the results of an earlier evaluation in `--out`.
@@ -279,7 +284,7 @@ pub struct RunArgs {
     /// Training episodes per trial (0 only with --resume: evaluate only).
     #[arg(long, default_value_t = 50_000)]
     pub episodes: u64,
-    /// Independent trials (own seed, world and learners), advanced together.
+    /// Independent trials (own seed, world and learners), advanced together; 1 to 16.
     #[arg(long, default_value_t = 4)]
     pub trials: usize,
     /// Seed of the run; every random stream is derived from it.
@@ -317,9 +322,9 @@ pub struct RunArgs {
     /// episodes (0: only after training); drawn on the curve plot, in greedy_curve.csv.
     #[arg(long, default_value_t = 0)]
     pub eval_every: u64,
-    /// Episodes of each periodic greedy evaluation.
-    #[arg(long, default_value_t = 100)]
-    pub eval_block: u64,
+    /// Episodes of each periodic greedy evaluation (only with --eval-every) [default: 100].
+    #[arg(long)]
+    pub eval_block: Option<u64>,
     /// Smoothing window (episodes) of the learning curve [default: episodes / 100, at least 1].
     #[arg(long)]
     pub smoothing: Option<usize>,

@@ -109,13 +109,18 @@ pub fn eval(
         episodes: 0,
         eval_episodes: episodes,
         eval_every: 0,
+        eval_block: None,
         resume: Some(dir.to_path_buf()),
         out: Some(out.unwrap_or_else(|| dir.join("eval"))),
         transport,
         run_id: None,
         ..defaults.clone()
     };
-    let config = crate::config::RunConfig::resolve_resuming_as(&args, "eval --qtables")?;
+    let mut config = crate::config::RunConfig::resolve_resuming_as(&args, "eval --qtables")?;
+    if let Some(note) = attached_left_out(&summary, uavs) {
+        output::message(&format!("supervisor: {note}"));
+        config.notes.push(note);
+    }
     let outcome = crate::run::run_experiment(&config, stop)?;
     let result = crate::summary::summary_file(&config.out)?;
     for (agent, length) in
@@ -142,6 +147,26 @@ pub fn eval(
     Ok(outcome.complete)
 }
 
+/// What `eval` leaves out of a run whose `summary.json` lists agents that attached (`agents`,
+/// `attached`): it starts the `uavs` agents the run started, as the run did, and an agent
+/// that attached joined a run in progress, which an evaluation has not. None if none did.
+fn attached_left_out(summary: &serde_json::Value, uavs: usize) -> Option<String> {
+    let attached: Vec<String> = summary["agents"]
+        .as_array()?
+        .iter()
+        .filter(|agent| agent["attached"].as_bool() == Some(true))
+        .filter_map(|agent| Some(format!("UAV{}", agent["uav"].as_u64()?)))
+        .collect();
+    let started: Vec<String> = (1..=uavs).map(|n| format!("UAV{n}")).collect();
+    (!attached.is_empty()).then(|| {
+        format!(
+            "eval evaluates only the agents the run started ({}), not {}, which attached to it",
+            started.join(", "),
+            attached.join(", ")
+        )
+    })
+}
+
 /// Whole number `key` of the `summary.json` at `path`, as a `T`, checked to be in `range`.
 fn summary_number<T: TryFrom<u64>>(
     summary: &serde_json::Value,
@@ -160,4 +185,25 @@ fn summary_number<T: TryFrom<u64>>(
     T::try_from(value)
         .ok()
         .with_context(|| format!("{}: `{key}` {value} is out of range", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_evaluation_says_which_attached_agents_it_leaves_out() {
+        let summary = serde_json::json!({ "agents": [
+            { "uav": 1, "attached": false },
+            { "uav": 2, "attached": false },
+            { "uav": 3, "attached": true },
+        ] });
+        assert_eq!(
+            attached_left_out(&summary, 2).as_deref(),
+            Some("eval evaluates only the agents the run started (UAV1, UAV2), not UAV3, which attached to it")
+        );
+        let none_attached = serde_json::json!({ "agents": [{ "uav": 1, "attached": false }] });
+        assert_eq!(attached_left_out(&none_attached, 1), None);
+        assert_eq!(attached_left_out(&serde_json::json!({}), 1), None, "an older summary");
+    }
 }

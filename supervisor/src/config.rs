@@ -49,6 +49,9 @@ pub struct RunConfig {
     pub snapshot_every: u64,
     /// Per agent slot: the fault to inject (test aid).
     pub faults: Vec<(usize, String)>,
+    /// What the summary's `notes` say about the configuration before anything the run
+    /// notes itself (`eval` says which agents of the run it evaluates).
+    pub notes: Vec<String>,
 }
 
 impl RunConfig {
@@ -74,9 +77,7 @@ impl RunConfig {
         if args.tick_cap == 0 {
             bail!("--tick-cap must be at least 1");
         }
-        if args.eval_every > 0 && args.eval_block == 0 {
-            bail!("--eval-every {} needs an --eval-block of at least 1 episode", args.eval_every);
-        }
+        check_eval_every(args)?;
         if args.smoothing == Some(0) {
             bail!("--smoothing must be at least 1 episode");
         }
@@ -130,7 +131,7 @@ impl RunConfig {
                 train_episodes: args.episodes,
                 eval_episodes: args.eval_episodes,
                 eval_every: args.eval_every,
-                eval_block: args.eval_block,
+                eval_block: eval_block(args),
                 tick_cap: args.tick_cap,
             },
             uavs: args.uavs,
@@ -148,6 +149,7 @@ impl RunConfig {
             restart: args.restart.unwrap_or(Restart::Never),
             snapshot_every: args.snapshot_every.unwrap_or(DEFAULT_SNAPSHOT_EVERY),
             faults: parse_faults(&args.faults, args.uavs)?,
+            notes: Vec::new(),
         };
         if config.transport == Transport::Inproc {
             refuse_process_flags(args)?;
@@ -184,6 +186,43 @@ const DEFAULT_AGENT_TIMEOUT_MS: u64 = 500;
 /// `--snapshot-every` unless given (README: 10 000 episodes of a 4-trial s3 run cost about
 /// 0.7 s of waiting for snapshots).
 const DEFAULT_SNAPSHOT_EVERY: u64 = 10_000;
+
+/// `--eval-block` unless given: 100 greedy episodes a block.
+const DEFAULT_EVAL_BLOCK: u64 = 100;
+
+/// The episodes of each periodic greedy evaluation.
+fn eval_block(args: &RunArgs) -> u64 {
+    args.eval_block.unwrap_or(DEFAULT_EVAL_BLOCK)
+}
+
+/// Refuses periodic-evaluation flags that would be ignored or evaluate nothing: an
+/// `--eval-block` without `--eval-every`, an `--eval-every` the training never reaches
+/// before its last episode (the periodic evaluations run after every N training episodes
+/// but the last, which the final evaluation follows), a block of no episodes.
+fn check_eval_every(args: &RunArgs) -> Result<()> {
+    if args.eval_every == 0 {
+        if let Some(block) = args.eval_block {
+            bail!(
+                "--eval-block {block} sizes the periodic greedy evaluations of --eval-every, \
+                 which is not given: give --eval-every N, or leave --eval-block out"
+            );
+        }
+        return Ok(());
+    }
+    if args.eval_every >= args.episodes {
+        bail!(
+            "--eval-every {every} with --episodes {}: no periodic greedy evaluation would run \
+             (one runs after every {every} training episodes, before the last); give an \
+             --eval-every below --episodes, or leave it out",
+            args.episodes,
+            every = args.eval_every,
+        );
+    }
+    if eval_block(args) == 0 {
+        bail!("--eval-every {} needs an --eval-block of at least 1 episode", args.eval_every);
+    }
+    Ok(())
+}
 
 /// Refuses, for an in-process run, the flags that only watch or shape agent processes: it
 /// has none, and a flag it would ignore is refused as elsewhere (the values were checked
@@ -226,18 +265,19 @@ pub fn default_comm(uavs: usize) -> CommMode {
     }
 }
 
-/// Refuses episode counts the run cannot count or keep: training episodes over all trials
-/// past `u64`, more periodic evaluations than [`MAX_EVAL_BLOCKS`] (the collector keeps a
-/// total per agent and evaluation from the start), greedy episodes per trial past `u64`.
+/// Refuses episode counts the run cannot count or keep: training or greedy episodes over
+/// all trials past `u64` (each is counted over every trial), more periodic evaluations than
+/// [`MAX_EVAL_BLOCKS`] (the collector keeps a total per agent and evaluation from the start).
 fn check_episode_counts(args: &RunArgs) -> Result<()> {
-    if args.episodes.checked_mul(args.trials as u64).is_none() {
+    let trials = args.trials as u64;
+    if args.episodes.checked_mul(trials).is_none() {
         bail!(
             "--episodes {} with --trials {}: more training episodes in all than a run can count",
             args.episodes,
             args.trials
         );
     }
-    let plan = EvalPlan::new(args.episodes, args.eval_every, args.eval_block);
+    let plan = EvalPlan::new(args.episodes, args.eval_every, eval_block(args));
     if plan.blocks > MAX_EVAL_BLOCKS {
         bail!(
             "--eval-every {} with --episodes {}: {} periodic greedy evaluations per trial, at \
@@ -247,13 +287,21 @@ fn check_episode_counts(args: &RunArgs) -> Result<()> {
             plan.blocks
         );
     }
-    if plan.greedy_episodes(args.eval_episodes).is_none() {
+    let Some(per_trial) = plan.greedy_episodes(args.eval_episodes) else {
         bail!(
             "--eval-block {} with --eval-episodes {}: {} blocks and the final evaluation are \
              more greedy episodes per trial than a run can count",
-            args.eval_block,
+            plan.block,
             args.eval_episodes,
             plan.blocks
+        );
+    };
+    if per_trial.checked_mul(trials).is_none() {
+        bail!(
+            "--eval-episodes {} with --trials {}: more greedy episodes in all than a run can \
+             count",
+            args.eval_episodes,
+            args.trials
         );
     }
     Ok(())
@@ -307,10 +355,11 @@ fn check_snapshots(config: &RunConfig, dir: &Path, flag: &str) -> Result<()> {
 /// `overwrite` that would remove the snapshots `resume` starts from.
 fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<()> {
     let Some(found) = crate::results::earlier_results(out) else { return Ok(()) };
+    // Not `--out DIR`: `reproduce` and `eval` choose the directory when no --out is given.
     if !overwrite {
         bail!(
-            "--out {}: holds the results of an earlier run ({found}); choose another \
-             directory, or --overwrite to replace them",
+            "results directory {}: holds the results of an earlier run ({found}); choose \
+             another directory (--out), or --overwrite to replace them",
             out.display()
         );
     }
@@ -376,5 +425,84 @@ mod tests {
         let expected = Path::new(env!("CARGO_MANIFEST_DIR")).join(relative).canonicalize();
         assert_eq!(Path::new(&absolute), expected.unwrap());
         assert!(!absolute.contains(".."), "{absolute}");
+    }
+
+    /// The run flags of `supervisor FLAGS...`.
+    fn args(flags: &[&str]) -> RunArgs {
+        use clap::Parser;
+        let cli = crate::cli::Cli::try_parse_from(["supervisor"].iter().chain(flags)).unwrap();
+        cli.run
+    }
+
+    /// The error of the run flags `flags`, checked as far as the episode counts.
+    fn refused(flags: &[&str]) -> String {
+        let args = args(flags);
+        check_eval_every(&args).and_then(|()| check_episode_counts(&args)).unwrap_err().to_string()
+    }
+
+    /// `--eval-block` alone, or an `--eval-every` the run never reaches before its last
+    /// episode, would be ignored: no periodic evaluation runs.
+    #[test]
+    fn periodic_evaluation_flags_that_evaluate_nothing_are_refused() {
+        assert_eq!(
+            refused(&["--eval-block", "50"]),
+            "--eval-block 50 sizes the periodic greedy evaluations of --eval-every, which is \
+             not given: give --eval-every N, or leave --eval-block out"
+        );
+        for every in ["10", "100"] {
+            let e = refused(&["--eval-every", every, "--episodes", "10"]);
+            assert!(
+                e.starts_with(&format!(
+                    "--eval-every {every} with --episodes 10: no periodic greedy evaluation would run"
+                )),
+                "{e}"
+            );
+        }
+        let runs = args(&["--eval-every", "9", "--episodes", "10", "--eval-block", "5"]);
+        check_eval_every(&runs).expect("one evaluation, after episode 9");
+        assert_eq!(eval_block(&runs), 5);
+        assert_eq!(eval_block(&args(&["--eval-every", "9"])), DEFAULT_EVAL_BLOCK);
+    }
+
+    /// Greedy episodes are counted over all trials as training episodes are: past `u64`
+    /// either way, by whichever flag, is refused.
+    #[test]
+    fn greedy_episodes_past_what_a_run_can_count_are_refused_as_training_ones_are() {
+        let most = u64::MAX.to_string();
+        assert_eq!(
+            refused(&["--eval-episodes", &most]),
+            format!(
+                "--eval-episodes {most} with --trials 4: more greedy episodes in all than a run \
+                 can count"
+            )
+        );
+        assert_eq!(
+            refused(&["--episodes", &most]),
+            format!(
+                "--episodes {most} with --trials 4: more training episodes in all than a run can \
+                 count"
+            )
+        );
+        let one_trial = args(&["--eval-episodes", &most, "--trials", "1"]);
+        check_episode_counts(&one_trial).expect("as many as a u64 counts");
+        let e = refused(&["--eval-every", "1000", "--episodes", "2001", "--eval-block", &most]);
+        assert!(e.contains("more greedy episodes per trial than a run can count"), "{e}");
+    }
+
+    /// `reproduce` and `eval` choose a results directory when no `--out` is given: the
+    /// refusal names the directory, not a `--out` the user did not type.
+    #[test]
+    fn a_results_directory_holding_a_run_is_refused_without_claiming_an_out_flag() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("summary.json"), "{}").unwrap();
+        let e = check_out_dir(dir.path(), false, None).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            format!(
+                "results directory {}: holds the results of an earlier run (summary.json); \
+                 choose another directory (--out), or --overwrite to replace them",
+                dir.path().display()
+            )
+        );
     }
 }

@@ -91,10 +91,11 @@ pub fn write_greedy_csv(path: &Path, greedy: &[Vec<(u64, f64, u64)>]) -> Result<
 }
 
 /// Reads agent `agent`'s smoothed curve back from a `curve.csv`: (episode, smoothed length)
-/// points.
+/// points. Every field of every row is checked, also those not drawn: a file that is not
+/// what `write_csv` writes is refused at its first bad field, named with file and line.
 pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<(u64, f64)>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = flockstep_world::map::read_input(path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
     let header = text.lines().next().unwrap_or_default();
     anyhow::ensure!(
         header.trim_end() == CURVE_HEADER,
@@ -103,30 +104,58 @@ pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<(u64, f64)>> {
     );
     let mut points = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
-        let fields: Vec<&str> = line.split(',').collect();
-        let parse = || -> Option<(u64, usize, f64)> {
-            Some((
-                fields.first()?.parse().ok()?,
-                fields.get(1)?.parse().ok()?,
-                fields.get(3)?.parse().ok()?,
-            ))
-        };
-        let (episode, row_agent, smoothed) = parse()
-            .with_context(|| format!("{}:{}: expected {CURVE_HEADER}", path.display(), i + 1))?;
-        // `inf`, `NaN` and `1e400` parse as numbers, but are no episode length to plot.
+        let row = Row { path, line: i + 1, fields: line.trim_end().split(',').collect() };
         anyhow::ensure!(
-            smoothed.is_finite() && smoothed >= 0.0,
-            "{}:{}: smoothed_length `{}` is not an episode length (a finite number >= 0)",
+            row.fields.len() == 4,
+            "{}:{}: {} fields, expected 4: {CURVE_HEADER}",
             path.display(),
-            i + 1,
-            fields[3]
+            row.line,
+            row.fields.len()
         );
+        let episode: u64 = row.parse(0, "an episode number")?;
+        let row_agent: usize = row.parse(1, "an agent number")?;
+        row.length(2)?;
+        let smoothed = row.length(3)?;
         if row_agent == agent {
             points.push((episode, smoothed));
         }
     }
     anyhow::ensure!(!points.is_empty(), "{}: no rows for agent {agent}", path.display());
     Ok(points)
+}
+
+/// One data row of a `curve.csv` being read, for errors that name its place and field.
+struct Row<'a> {
+    path: &'a Path,
+    line: usize,
+    fields: Vec<&'a str>,
+}
+
+impl Row<'_> {
+    /// Field `k` as a `T`, which it must be (`what` says what that is).
+    fn parse<T: std::str::FromStr>(&self, k: usize, what: &str) -> Result<T> {
+        self.fields[k].parse().map_err(|_| self.not(k, what))
+    }
+
+    /// Field `k` as an episode length. `inf`, `NaN` and `1e400` parse as numbers, but are no
+    /// episode length to plot.
+    fn length(&self, k: usize) -> Result<f64> {
+        const WHAT: &str = "an episode length (a finite number >= 0)";
+        let length: f64 = self.parse(k, WHAT)?;
+        anyhow::ensure!(length.is_finite() && length >= 0.0, self.not(k, WHAT));
+        Ok(length)
+    }
+
+    /// The error of field `k`, which is not `what` it should be.
+    fn not(&self, k: usize, what: &str) -> anyhow::Error {
+        let name = CURVE_HEADER.split(',').nth(k).unwrap_or_default();
+        anyhow::anyhow!(
+            "{}:{}: {name} `{}` is not {what}",
+            self.path.display(),
+            self.line,
+            self.fields[k]
+        )
+    }
 }
 
 #[cfg(test)]
@@ -163,17 +192,24 @@ mod tests {
         };
         let e = refused("a hostname\n");
         assert!(e.ends_with("curve.csv:1: not a curve.csv: expected the header `episode,agent,mean_length,smoothed_length`, found `a hostname`"), "{e}");
-        for bad_row in ["1,one,2,3", "one,1,2,3"] {
+        for (bad_row, expected) in [
+            ("1,one,2,3", "agent `one` is not an agent number"),
+            ("one,1,2,3", "episode `one` is not an episode number"),
+            ("1,1,2", "3 fields, expected 4: episode,agent,mean_length,smoothed_length"),
+            ("1,1,2,3,4", "5 fields, expected 4"),
+        ] {
             let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n{bad_row}\n"));
-            assert!(
-                e.ends_with("curve.csv:3: expected episode,agent,mean_length,smoothed_length"),
-                "{e}"
-            );
+            assert!(e.contains(&format!("curve.csv:3: {expected}")), "{e}");
         }
-        for bad in ["inf", "NaN", "1e400", "-1"] {
-            let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n1,1,4,{bad}\n"));
-            let expected = format!("curve.csv:3: smoothed_length `{bad}` is not an episode length");
-            assert!(e.contains(&expected), "{e}");
+        for bad in ["inf", "NaN", "1e400", "-1", "abc", ""] {
+            for (row, field) in [
+                (format!("1,1,4,{bad}"), "smoothed_length"),
+                (format!("1,1,{bad},4"), "mean_length"),
+            ] {
+                let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n{row}\n"));
+                let expected = format!("curve.csv:3: {field} `{bad}` is not an episode length");
+                assert!(e.contains(&expected), "{e}");
+            }
         }
         let e = refused(&format!("{CURVE_HEADER}\n0,2,4,4\n"));
         assert!(e.ends_with("curve.csv: no rows for agent 1"), "{e}");

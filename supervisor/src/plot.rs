@@ -7,7 +7,7 @@
 //! second shows the rest of the run after its first tenth, with the episode-length axis
 //! fitted to the curves there and to the reference lines up to twice their height.
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, Context, Result};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -82,7 +82,10 @@ const SIZE: (u32, u32) = (960, 960);
 const FIRST_PANEL_HEIGHT: u32 = 530;
 
 /// Draws `series` (x = iteration, y = episode length) and `references` into an SVG file:
-/// the whole run, then the run after its first tenth with a fitted episode-length axis.
+/// the whole run, then, if at least two points are that late, the run after its first tenth
+/// with a fitted episode-length axis; one panel takes the whole image otherwise. A series
+/// without points (an evaluation has no learning curve) is left out, legend and all; without
+/// any, the plot shows the references alone, with no iterations axis.
 pub fn plot_curves(
     path: &Path,
     title: &str,
@@ -110,20 +113,38 @@ pub fn plot_curves(
     if !top.is_finite() {
         return Err(err(&format!("episode length {highest:e} is too large to plot")));
     }
-    let root = SVGBackend::new(path, SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let root = root.titled(title, ("sans-serif", 22)).map_err(|e| err(&e))?;
-    let (full, zoomed) = root.split_vertically(FIRST_PANEL_HEIGHT);
-    let whole = Panel { caption: None, x: 0.0..episodes, y: 0.0..top, legend: true };
-    whole.draw(&full, series, references).map_err(|e| err(&e))?;
-    let from = (episodes * ZOOM_SKIPS).round();
-    if let Some(y) = zoom(series, references, from) {
-        let caption = format!("after episode {from:.0}, episode length axis fitted");
-        let tail = Panel { caption: Some(caption), x: from..episodes, y, legend: false };
-        tail.draw(&zoomed, series, references).map_err(|e| err(&e))?;
+    let iterations = series.iter().any(|s| !s.points.is_empty());
+    // Drawn into memory, then written: a file that cannot be written is named with the
+    // reason alone, not inside plotters' "backend error: Drawing backend error: ...".
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let root = root.titled(title, ("sans-serif", 22)).map_err(|e| err(&e))?;
+        let whole =
+            Panel { caption: None, x: 0.0..episodes, y: 0.0..top, legend: true, iterations };
+        let from = (episodes * ZOOM_SKIPS).round();
+        match zoom(series, references, from) {
+            Some(y) => {
+                let (full, zoomed) = root.split_vertically(FIRST_PANEL_HEIGHT);
+                whole.draw(&full, series, references).map_err(|e| err(&e))?;
+                let caption = format!("after episode {from:.0}, episode length axis fitted");
+                let x = from..episodes;
+                let tail = Panel { caption: Some(caption), x, y, legend: false, iterations };
+                tail.draw(&zoomed, series, references).map_err(|e| err(&e))?;
+            }
+            None => whole.draw(&root, series, references).map_err(|e| err(&e))?,
+        }
+        root.present().map_err(|e| err(&e))?;
     }
-    root.present().map_err(|e| err(&e))?;
-    Ok(())
+    std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Labels of an axis of whole numbers (episodes) over `range`: at most one per whole number
+/// in it, so that plotters steps by at least 1 (it steps by 1, 2 or 5 times a power of ten,
+/// as few as fit the count) and no two labels round to the same number; 10 at most.
+fn whole_labels(range: &Range<f64>) -> usize {
+    ((range.end - range.start).floor() as usize + 1).min(10)
 }
 
 /// The episode-length range of the second panel: the curves from episode `from` on, and the
@@ -148,20 +169,22 @@ fn zoom(series: &[Series], references: &[Reference], from: f64) -> Option<Range<
     Some((lo - pad).max(0.0)..hi + pad)
 }
 
-/// One chart of a plot: its ranges, and whether it carries the legend.
+/// One chart of a plot: its ranges, whether it carries the legend, and whether it has an
+/// iterations axis (some series has points).
 struct Panel {
     caption: Option<String>,
     x: Range<f64>,
     y: Range<f64>,
     legend: bool,
+    iterations: bool,
 }
 
 type DrawResult = Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
 impl Panel {
-    /// Draws the series, then as dashed lines the references within the panel's range, each
-    /// in its curve's color or else the color its place in `references` gives it, the same in
-    /// every panel.
+    /// Draws the series that have points (one of a single point as a dot), then as dashed
+    /// lines the references within the panel's range, each in its curve's color or else the
+    /// color its place in `references` gives it, the same in every panel.
     fn draw(
         &self,
         area: &DrawingArea<SVGBackend, Shift>,
@@ -177,17 +200,26 @@ impl Panel {
             .x_label_area_size(44)
             .y_label_area_size(56)
             .build_cartesian_2d(self.x.clone(), self.y.clone())?;
-        chart
-            .configure_mesh()
-            .x_desc("iterations (episodes)")
-            .y_desc("episode length (ticks)")
+        let mut mesh = chart.configure_mesh();
+        mesh.y_desc("episode length (ticks)");
+        if self.iterations {
             // Episodes are whole numbers.
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .draw()?;
+            mesh.x_desc("iterations (episodes)")
+                .x_labels(whole_labels(&self.x))
+                .x_label_formatter(&|x| format!("{x:.0}"));
+        } else {
+            mesh.x_labels(0);
+        }
+        mesh.draw()?;
         let x = self.x.clone();
-        for (i, s) in series.iter().enumerate() {
+        for (i, s) in series.iter().enumerate().filter(|(_, s)| !s.points.is_empty()) {
             let color = COLORS[i % COLORS.len()];
-            let points = s.points.iter().copied().filter(|p| p.0 >= x.start);
+            let points: Vec<(f64, f64)> =
+                s.points.iter().copied().filter(|p| p.0 >= x.start).collect();
+            // A line through one point draws nothing.
+            if let [point] = points[..] {
+                chart.draw_series([Circle::new(point, 4, color.filled())])?;
+            }
             chart
                 .draw_series(LineSeries::new(points, color.stroke_width(2)))?
                 .label(s.label.clone())
@@ -350,5 +382,66 @@ mod tests {
         let texts = drawn_texts(&[one], &[]);
         assert!(!texts.iter().any(|t| t.starts_with("after episode")), "a second panel: {texts:?}");
         assert!(texts.iter().any(|t| t == "UAV1"), "the legend is missing");
+    }
+
+    /// A run of 7 episodes (0 to 6): plotters' default of 10 labels would step by 0.5, and
+    /// `{:.0}` printed "1 2 2 3 4 4 5 6".
+    #[test]
+    fn whole_number_axis_labels_do_not_repeat() {
+        for episodes in [2u64, 7, 13, 31, 100] {
+            let points: Vec<(u64, f64)> = (0..episodes).map(|e| (e, 500.0 - e as f64)).collect();
+            let texts = drawn_texts(&[Series::from_episodes("UAV1".into(), &points)], &[]);
+            // The second panel's texts follow its caption.
+            for panel in texts.split(|t| t.starts_with("after episode")) {
+                let mut labels: Vec<&String> =
+                    panel.iter().filter(|t| t.parse::<u64>().is_ok()).collect();
+                let all = labels.len();
+                assert!(all >= 2, "{episodes} episodes: labels {labels:?}");
+                labels.sort();
+                labels.dedup();
+                assert_eq!(labels.len(), all, "{episodes} episodes: repeated labels {panel:?}");
+            }
+        }
+    }
+
+    /// `eval` has no training: its plot has the greedy lengths alone, on one panel, with no
+    /// iterations axis and no legend entry for the empty learning curves.
+    #[test]
+    fn a_plot_without_points_shows_its_references_alone() {
+        let empty = [Series { label: "UAV1 (mean of 4 trials)".into(), points: vec![] }];
+        let greedy = Reference {
+            label: "UAV1 greedy after training".into(),
+            value: 250.0,
+            detail: None,
+            curve: Some(0),
+        };
+        let texts = drawn_texts(&empty, &[greedy]);
+        let has = |text: &str| texts.iter().any(|t| t == text);
+        assert!(has("UAV1 greedy after training (250.00)"), "{texts:?}");
+        assert!(!has("UAV1 (mean of 4 trials)"), "a legend for a curve without data");
+        assert!(!has("iterations (episodes)"), "an iterations axis without iterations");
+        assert!(!texts.iter().any(|t| t.starts_with("after episode")), "a second panel");
+    }
+
+    /// A line through one point draws nothing: the point is drawn as a dot.
+    #[test]
+    fn a_series_of_one_point_is_drawn_as_a_dot() {
+        let one = [Series { label: "one".into(), points: vec![(0.0, 4.0)] }];
+        let svg = drawn_texts(&one, &[]).join("\n");
+        assert!(svg.contains("<circle"), "no dot in {svg}");
+        let two = [Series { label: "two".into(), points: vec![(0.0, 4.0), (1.0, 3.0)] }];
+        assert!(!drawn_texts(&two, &[]).join("\n").contains("<circle"), "a dot on a line");
+    }
+
+    /// The error says why the file cannot be written, once, without plotters' wrappers.
+    #[test]
+    fn a_plot_that_cannot_be_written_says_why_once() {
+        let path = Path::new("/nonexistent/curve.svg");
+        let series = [Series { label: "UAV1".into(), points: vec![(0.0, 4.0), (1.0, 3.0)] }];
+        let e = format!("{:#}", plot_curves(path, "test", &series, &[]).unwrap_err());
+        assert_eq!(
+            e,
+            "cannot write /nonexistent/curve.svg: No such file or directory (os error 2)"
+        );
     }
 }

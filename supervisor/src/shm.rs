@@ -257,6 +257,9 @@ impl Fleet<'_> {
             if stop.load(Ordering::Relaxed) && control.stop == 0 {
                 control.stop = 1;
                 ports.send_control(&control)?;
+                // The stop round waits for every agent's final tables: up to 30 s for one
+                // that hangs, so say what is going on.
+                recorder.say("stopping: every agent saves its Q-tables in the next round");
             }
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
@@ -334,14 +337,16 @@ impl Fleet<'_> {
     }
 }
 
-/// The agents that attached and those that left between memberships `before` and `after`,
-/// as (slot, process id): every process that held a slot and is not one of the supervisor's
-/// own (`own`).
+/// Attached agents as (slot, process id).
+type Attached = Vec<(usize, u32)>;
+
+/// The agents that attached and those that left between memberships `before` and `after`:
+/// every process that held a slot and is not one of the supervisor's own (`own`).
 fn attached_changes(
     before: &Membership,
     after: &Membership,
     own: impl Fn(u32) -> bool,
-) -> (Vec<(usize, u32)>, Vec<(usize, u32)>) {
+) -> (Attached, Attached) {
     let holder = |m: &Membership, slot: usize| {
         let pid = m.pids[slot];
         (m.live >> slot & 1 == 1 && pid != 0 && !own(pid)).then_some(pid)

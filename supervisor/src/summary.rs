@@ -3,11 +3,13 @@
 //! stand the exact optima of its route flown alone: with a memoryless policy, and knowing
 //! the target in advance (a lower bound for any communication).
 
+use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
 use crate::results::Flown;
 use crate::run::Outcome;
 use anyhow::{Context, Result};
+use clap::ValueEnum;
 use flockstep_world::optimum::{optimum, optimum_with_known_target};
 use serde_json::{json, Value};
 use std::path::Path;
@@ -36,13 +38,15 @@ pub fn summary(
     let finals: Vec<_> = (0..agents).map(|a| collector.final_mean(a, FINAL_WINDOW)).collect();
     let final_means: Vec<_> = finals.iter().map(|f| f.map(|(mean, _)| mean)).collect();
     let final_windows: Vec<_> = finals.iter().map(|f| f.map(|(_, window)| window)).collect();
-    let mut notes = recorder.notes().to_vec();
+    let mut notes = config.notes.clone();
+    notes.extend(recorder.notes().iter().cloned());
     notes.extend(error.map(str::to_string));
-    // Absolute, so that the record still leads to the snapshots from another directory.
-    let resume = config
-        .resume
-        .as_ref()
-        .map(|dir| dir.canonicalize().unwrap_or_else(|_| dir.clone()).display().to_string());
+    // Settings of agent processes: an in-process run has none, and refuses them.
+    let processes = config.transport == Transport::Shm;
+    // As typed: `never` or `on-failure`.
+    let restart = processes
+        .then(|| config.restart.to_possible_value().map(|v| v.get_name().to_string()))
+        .flatten();
     json!({
         "flockstep_version": env!("CARGO_PKG_VERSION"),
         "iceoryx2_version": ICEORYX2_VERSION,
@@ -65,9 +69,14 @@ pub fn summary(
         "gamma": config.params.gamma,
         "epsilon": config.params.epsilon,
         "tree": config.tree_text(),
-        "tree_file": config.bt_path.as_ref().map(|p| p.display().to_string()),
+        "tree_file": config.bt_path.as_deref().map(absolute),
         "smoothing_window": config.smoothing,
-        "resume": resume,
+        "eval_every": config.episodes.eval_every,
+        "eval_block": (config.episodes.eval_every > 0).then_some(config.episodes.eval_block),
+        "restart": restart,
+        "snapshot_every": processes.then_some(config.snapshot_every),
+        "agent_timeout_ms": processes.then_some(config.agent_timeout_ms),
+        "resume": config.resume.as_deref().map(absolute),
         "ticks": ticks,
         "rounds": collector.rounds(),
         "env_steps": recorder.env_steps(),
@@ -87,6 +96,12 @@ pub fn summary(
         "optimum_memoryless": (0..agents).map(|a| optimum(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
         "optimum_known_target": (0..agents).map(|a| optimum_with_known_target(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
     })
+}
+
+/// `path` made absolute, so that the record still leads to the file from another directory
+/// (as is when it cannot be: it was there when the run started).
+fn absolute(path: &Path) -> String {
+    path.canonicalize().unwrap_or_else(|_| path.to_path_buf()).display().to_string()
 }
 
 /// Every agent that flew a training episode: its number, whether it attached to the run (on
@@ -118,10 +133,11 @@ pub fn write(path: &Path, value: &Value) -> Result<()> {
     std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Reads back the `summary.json` of a results directory.
+/// Reads back the `summary.json` of a results directory (at most
+/// [`flockstep_world::map::MAX_INPUT_BYTES`]: `eval` reads one a user names).
 pub fn summary_file(dir: &Path) -> Result<Value> {
     let path = dir.join("summary.json");
-    let text = std::fs::read_to_string(&path)
+    let text = flockstep_world::map::read_input(&path)
         .with_context(|| format!("cannot read {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))
 }

@@ -6,8 +6,8 @@
 //! run starts.
 
 use crate::harness::{
-    assert_nothing_left, error_line, first_difference, read, run_fail, run_id, run_ok, scratch,
-    words, Spawned, SUPERVISOR,
+    assert_nothing_left, error_line, first_difference, read, repo_file, run_fail, run_id, run_ok,
+    scratch, summary, supervise, words, Spawned, AGENT, SUPERVISOR,
 };
 use flockstep_supervisor::results::RUN_OUTPUTS;
 use std::time::Duration;
@@ -139,7 +139,7 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
 
     let line = error_line(&as_strs(&run(&[])));
     assert!(
-        line.contains(&format!("--out {out_arg}: holds the results of an earlier run")),
+        line.contains(&format!("results directory {out_arg}: holds the results of an earlier run")),
         "{line}"
     );
     assert!(line.contains("--overwrite"), "{line}");
@@ -464,4 +464,213 @@ fn a_scenario_path_too_long_to_hand_on_is_refused() {
     let line = error_line(&["--scenario", &map, "--out", &out, "--episodes", "1"]);
     assert!(line.contains(&format!("--scenario {map}: its absolute path")), "{line}");
     assert!(line.contains("is longer than the 512 bytes"), "{line}");
+}
+
+/// A `curve.csv` field that is no number was read as nothing, and `plot` exited 0: every
+/// field is checked, and the refusal names file, line and field.
+#[test]
+fn plot_refuses_a_curve_field_that_is_not_a_number_naming_it() {
+    let dir = scratch();
+    let curve = dir.path().join("curve.csv");
+    let out = dir.path().join("plot.svg");
+    for (row, field) in [("1,1,abc,35", "mean_length"), ("1,1,30,abc", "smoothed_length")] {
+        let text = format!("episode,agent,mean_length,smoothed_length\n0,1,40,40\n{row}\n");
+        std::fs::write(&curve, text).expect("write curve.csv");
+        let spec = format!("{}=bad", curve.display());
+        let line = error_line(&["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+        let expected = format!("{}:3: {field} `abc` is not an episode length", curve.display());
+        assert!(line.contains(&expected), "{line}");
+        assert!(!out.exists(), "a plot was drawn");
+    }
+}
+
+/// A curve of one row drew an empty plot: its point is drawn as a dot.
+#[test]
+fn plot_of_a_one_row_curve_draws_its_point() {
+    let dir = scratch();
+    let curve = dir.path().join("curve.csv");
+    std::fs::write(&curve, "episode,agent,mean_length,smoothed_length\n0,1,40,40\n")
+        .expect("write curve.csv");
+    let out = dir.path().join("one.svg");
+    let spec = format!("{}=one row", curve.display());
+    run_ok(SUPERVISOR, &["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+    let svg = String::from_utf8(read(&out)).expect("UTF-8");
+    assert!(svg.contains("<circle"), "no dot for the one point:\n{svg}");
+}
+
+/// A plot that cannot be written said "backend error: Drawing backend error: ...": the
+/// reason is given once.
+#[test]
+fn plot_that_cannot_be_written_says_why_once() {
+    let dir = scratch();
+    let curve = dir.path().join("curve.csv");
+    std::fs::write(&curve, "episode,agent,mean_length,smoothed_length\n0,1,40,40\n1,1,30,35\n")
+        .expect("write curve.csv");
+    let spec = format!("{}=a run", curve.display());
+    let out = dir.path().join("missing").join("plot.svg");
+    let line = error_line(&["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+    assert_eq!(
+        line,
+        format!(
+            "supervisor: error: cannot write {}: No such file or directory (os error 2)",
+            out.display()
+        )
+    );
+}
+
+/// `agent bt replay` gave results to leaves the tree does not have (a typo), and let the
+/// last of two results for a leaf win: both are refused with the script's line.
+#[test]
+fn replay_refuses_unknown_and_repeated_leaves() {
+    let dir = scratch();
+    let tree = repo_file("tests/data/show_replay.bt");
+    let script = dir.path().join("bad.script");
+    for (line, expected) in [
+        ("C-nope=S", "bad.script:1: `C-nope=S`: the tree has no leaf C-nope (its leaves: A-report A-climb A-scan C-done)"),
+        ("done=S done=F", "bad.script:1: `done=F`: leaf done is given twice on this line"),
+    ] {
+        std::fs::write(&script, format!("{line}\n")).expect("write the script");
+        let (out, report) = run_fail(
+            AGENT,
+            &["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")],
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.lines().count(), 1, "{report}");
+        assert!(stderr.trim_end().ends_with(expected), "{report}");
+    }
+}
+
+/// Flags that would be ignored were accepted: `--eval-block` without `--eval-every`, and
+/// an `--eval-every` no training reaches before its end. `--eval-episodes` past what a run
+/// counts over its trials was accepted where the same count by `--eval-block` was refused.
+#[test]
+fn periodic_evaluation_flags_that_would_be_ignored_are_refused() {
+    for_both_transports(
+        &["--eval-block", "50"],
+        &["--eval-block 50", "--eval-every, which is not given"],
+    );
+    for_both_transports(
+        &["--eval-every", "100", "--episodes", "10"],
+        &["--eval-every 100 with --episodes 10: no periodic greedy evaluation would run"],
+    );
+    let most = u64::MAX.to_string();
+    for_both_transports(
+        &["--eval-episodes", &most],
+        &[&format!(
+            "--eval-episodes {most} with --trials 4: more greedy episodes in all than a run can count"
+        )],
+    );
+}
+
+/// Input files were read whole: `--scenario /dev/zero` read until memory ran out. Every
+/// file a user names is read up to 16 MiB, and refused past it with its name.
+#[test]
+fn endless_input_files_are_refused_at_the_size_bound() {
+    let limit = "larger than 16 MiB, the limit for an input file";
+    for_both_transports(&["--scenario", "/dev/zero"], &["/dev/zero", limit]);
+    // Needs /tmp/helper11_uav_tree.patch (agents/src/uav.rs reads trees through the bound).
+    for_both_transports(&["--bt", "/dev/urandom"], &["cannot read tree file /dev/urandom", limit]);
+    let dir = scratch();
+    let svg = dir.path().join("plot.svg").display().to_string();
+    let line = error_line(&["plot", "--curve", "/dev/zero=zeros", "--out", &svg]);
+    assert!(line.contains(&format!("cannot read /dev/zero: {limit}")), "{line}");
+    std::os::unix::fs::symlink("/dev/zero", dir.path().join("summary.json")).expect("a link");
+    let qtables = dir.path().display().to_string();
+    let line = error_line(&["eval", "--qtables", &qtables]);
+    assert!(line.contains(&format!("summary.json: {limit}")), "{line}");
+    for args in [&["bt", "show", "/dev/zero"][..], &["bt", "replay", "/dev/zero", "/dev/zero"]] {
+        let (out, report) = run_fail(AGENT, args);
+        assert!(String::from_utf8_lossy(&out.stderr).contains(limit), "{report}");
+    }
+}
+
+/// summary.json lacked the periodic evaluation and agent-process settings, and stored the
+/// tree file as given (relative) beside an absolute scenario.
+#[test]
+fn the_summary_records_the_whole_configuration() {
+    let dir = scratch();
+    let tree = dir.path().join("fig5.bt");
+    std::fs::copy(repo_file("agents/trees/fig5.bt"), &tree).expect("copy the tree");
+    // A relative path, as a user types it.
+    let relative = tree.strip_prefix(std::env::current_dir().expect("a directory")).ok();
+    let tree_arg = relative.unwrap_or(&tree).display().to_string();
+    let inproc = supervise(
+        &dir.path().join("inproc"),
+        &words(&format!(
+            "--uavs 1 --episodes 4 --trials 1 --eval-every 2 --eval-block 3 --eval-episodes 2 \
+             --transport inproc --bt {tree_arg}"
+        )),
+    );
+    assert_eq!(inproc["eval_every"], 2);
+    assert_eq!(inproc["eval_block"], 3);
+    for key in ["restart", "snapshot_every", "agent_timeout_ms"] {
+        assert!(inproc[key].is_null(), "{key} of an in-process run: {}", inproc[key]);
+    }
+    let canonical = tree.canonicalize().expect("the tree");
+    assert_eq!(inproc["tree_file"], canonical.display().to_string());
+    let shm = supervise(
+        &dir.path().join("shm"),
+        &words("--uavs 1 --episodes 2 --trials 1 --eval-episodes 2 --agent-timeout-ms 900"),
+    );
+    assert_eq!(
+        (shm["eval_every"].clone(), shm["eval_block"].clone()),
+        (0.into(), serde_json::Value::Null)
+    );
+    assert_eq!(shm["restart"], "never");
+    assert_eq!(shm["snapshot_every"], 10_000);
+    assert_eq!(shm["agent_timeout_ms"], 900);
+    assert!(shm["tree_file"].is_null(), "the built-in tree has no file");
+}
+
+/// `eval` of a run an agent attached to evaluated the starting agents only, silently: it
+/// says so on stderr and in its summary's notes. (The attached agent is written into the
+/// run's summary.json as a run records one; `eval` reads nothing else of it.)
+#[test]
+fn eval_of_a_run_with_an_attached_agent_says_what_it_leaves_out() {
+    let dir = scratch();
+    let run = dir.path().join("run");
+    let mut recorded = supervise(
+        &run,
+        &words(
+            "--uavs 2 --scenario s4 --episodes 2 --trials 1 --eval-episodes 1 --transport inproc",
+        ),
+    );
+    let attached = serde_json::json!({
+        "uav": 3, "attached": true, "first_episode_per_trial": [1], "episodes_per_trial": [1]
+    });
+    recorded["agents"].as_array_mut().expect("agents").push(attached);
+    std::fs::write(run.join("summary.json"), recorded.to_string()).expect("write summary.json");
+    let out = run_ok(SUPERVISOR, &["--quiet", "eval", "--qtables", &run.display().to_string()]);
+    let note = "eval evaluates only the agents the run started (UAV1, UAV2), not UAV3, which \
+                attached to it";
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains(&format!("supervisor: {note}")), "{stderr}");
+    let notes = summary(&run.join("eval"))["notes"].clone();
+    assert_eq!(notes, serde_json::json!([note]));
+}
+
+/// A results directory `eval` or `reproduce` chose (no --out given) that holds results was
+/// refused as "--out DIR: ...", a flag the user never typed.
+#[test]
+fn a_chosen_results_directory_is_refused_without_naming_an_out_flag() {
+    let dir = scratch();
+    let run = dir.path().join("run");
+    supervise(
+        &run,
+        &words("--uavs 1 --episodes 2 --trials 1 --eval-episodes 1 --transport inproc"),
+    );
+    let qtables = run.display().to_string();
+    run_ok(SUPERVISOR, &["--quiet", "eval", "--qtables", &qtables, "--episodes", "1"]);
+    let line = error_line(&["--quiet", "eval", "--qtables", &qtables, "--episodes", "1"]);
+    let expected = format!("results directory {}: holds the results", run.join("eval").display());
+    assert!(line.contains(&expected) && !line.contains("--out "), "{line}");
+}
+
+/// `eval --help` said nothing of `--out`; `--help` did not say that `--trials` is 1 to 16.
+#[test]
+fn help_describes_eval_out_and_the_trials_range() {
+    let help = |args: &[&str]| String::from_utf8(run_ok(SUPERVISOR, args).stdout).expect("UTF-8");
+    let eval = help(&["eval", "--help"]);
+    assert!(eval.contains("Directory for the evaluation's results"), "{eval}");
+    assert!(help(&["--help"]).contains("1 to 16"), "no range of --trials");
 }

@@ -9,6 +9,8 @@
 mod parse;
 
 use std::fmt;
+use std::io::Read;
+use std::path::Path;
 
 use flockstep_proto::Pose;
 
@@ -76,6 +78,29 @@ impl PartialEq for MapFile {
             && self.start == other.start
             && self.expects == other.expects
     }
+}
+
+/// The largest text file a user gives that flockstep reads: maps, trees, replay scripts,
+/// the `curve.csv` of `plot`, the `summary.json` of `eval`. 16 MiB is far past any real one
+/// (a generated 64-UAV map is under 100 KiB), and a mistaken `--scenario /dev/zero` is then
+/// an error naming the file, not a read that runs until memory does.
+pub const MAX_INPUT_BYTES: u64 = 16 << 20;
+
+/// Reads the text file `path` given by a user, at most [`MAX_INPUT_BYTES`] of it: a larger
+/// file (or an endless device) is an error, as is a file that is not UTF-8. Every such read
+/// goes through here, so the bound and its message are the same for every kind of file.
+pub fn read_input(path: &Path) -> std::io::Result<String> {
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?.take(MAX_INPUT_BYTES + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_INPUT_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {} MiB, the limit for an input file", MAX_INPUT_BYTES >> 20),
+        ));
+    }
+    String::from_utf8(bytes).map_err(|_| {
+        std::io::Error::new(std::io::ErrorKind::InvalidData, "not a text file (not UTF-8)")
+    })
 }
 
 /// `UAV1` for route index 0.
@@ -164,5 +189,24 @@ impl fmt::Display for MapFile {
             writeln!(f, "expect {uav} {target}: {}", fact_poses(&fact.poses))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn input_files_are_read_up_to_the_bound_and_must_be_text() {
+        let path = std::env::temp_dir().join(format!("flockstep-input-{}.txt", std::process::id()));
+        std::fs::write(&path, vec![b'x'; MAX_INPUT_BYTES as usize]).unwrap();
+        let whole = read_input(&path).map(|text| text.len() as u64);
+        std::fs::write(&path, [b'x', 0xff]).unwrap();
+        let binary = read_input(&path).map_err(|e| e.to_string());
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(whole.unwrap(), MAX_INPUT_BYTES, "a file of the limit's size is read");
+        assert_eq!(binary.unwrap_err(), "not a text file (not UTF-8)");
+        let endless = read_input(Path::new("/dev/zero")).unwrap_err().to_string();
+        assert_eq!(endless, "larger than 16 MiB, the limit for an input file");
     }
 }

@@ -52,9 +52,10 @@ pub struct Scenario {
 }
 
 impl Scenario {
-    /// Reads, parses, builds and verifies the map at `path`.
+    /// Reads (at most [`crate::map::MAX_INPUT_BYTES`]), parses, builds and verifies the map
+    /// at `path`.
     pub fn load(path: &Path) -> Result<Scenario, WorldError> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::map::read_input(path)
             .map_err(|source| WorldError::Io { path: path.to_path_buf(), source })?;
         Scenario::from_text(&path.display().to_string(), &text)
     }
@@ -245,4 +246,17 @@ fn target_mask(map: &MapFile, cell: (usize, usize), height: Height, heading: Hea
             mask
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mistaken path to an endless device is refused after the size bound, naming the
+    /// file and the limit, rather than read until memory runs out.
+    #[test]
+    fn an_endless_map_file_is_refused_at_the_size_bound() {
+        let e = Scenario::resolve("/dev/zero").unwrap_err().to_string();
+        assert_eq!(e, "cannot read /dev/zero: larger than 16 MiB, the limit for an input file");
+    }
 }

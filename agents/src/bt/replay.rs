@@ -12,8 +12,9 @@
 //! ```
 //!
 //! Results are `S`, `F`, `R` (SUCCESS, FAILURE, RUNNING; conditions take `S` or `F`). A leaf
-//! name stands for every leaf of that name. A leaf ticked without a result is an error that
-//! names the script line. Learning selectors order their children greedily by all-zero
+//! name stands for every leaf of that name; the tree must have one (`A-name`, `C-name`: of
+//! that kind), and a line gives each leaf, and `*`, at most once. A leaf ticked without a
+//! result is an error that names the script line. Learning selectors order their children greedily by all-zero
 //! Q-values, so ties are broken by the seeded RNG (`--seed`) and the replay is repeatable.
 //! The leaves command no UAV, so a run's limit of commands per tick does not apply here; a
 //! replay refuses a tree that may tick more than `MAX_REPLAY_ACTIONS` actions in one tick.
@@ -85,7 +86,14 @@ struct ScriptTick {
     default: Option<Status>,
 }
 
-fn parse_script(file: &str, text: &str) -> Result<Vec<ScriptTick>, ScriptError> {
+/// Parses a script for a tree whose leaves `catalog` holds. A name the tree has no leaf of
+/// (a typo would otherwise give its result to nothing), and a leaf or `*` given twice on a
+/// line (the last would win unseen), are errors naming the line.
+fn parse_script(
+    file: &str,
+    text: &str,
+    catalog: &OpenCatalog,
+) -> Result<Vec<ScriptTick>, ScriptError> {
     let mut ticks = Vec::new();
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
@@ -105,16 +113,41 @@ fn parse_script(file: &str, text: &str) -> Result<Vec<ScriptTick>, ScriptError> 
                 "R" => Status::Running,
                 other => return Err(error(format!("`{name}={other}`: a result is S, F or R"))),
             };
-            let name = name.trim_start_matches("A-").trim_start_matches("C-");
             if name == "*" {
-                tick.default = Some(status);
-            } else {
-                tick.results.insert(name.to_string(), status);
+                if tick.default.replace(status).is_some() {
+                    return Err(error(format!("`{item}`: `*` is given twice on this line")));
+                }
+                continue;
+            }
+            let leaf = leaf_name(name, catalog).map_err(|m| error(format!("`{item}`: {m}")))?;
+            if tick.results.insert(leaf.to_string(), status).is_some() {
+                return Err(error(format!("`{item}`: leaf {leaf} is given twice on this line")));
             }
         }
         ticks.push(tick);
     }
     Ok(ticks)
+}
+
+/// The leaf name `name` (`A-name`, `C-name` or `name`) stands for, checked to be one the
+/// tree has (of that kind, if it says which); else why not, listing the tree's leaves.
+fn leaf_name<'a>(name: &'a str, catalog: &OpenCatalog) -> Result<&'a str, String> {
+    let (kinds, bare): (&[LeafKind], &str) =
+        match (name.strip_prefix("A-"), name.strip_prefix("C-")) {
+            (Some(bare), _) => (&[LeafKind::Action], bare),
+            (_, Some(bare)) => (&[LeafKind::Condition], bare),
+            _ => (&[LeafKind::Action, LeafKind::Condition], name),
+        };
+    if kinds.iter().any(|&kind| catalog.names(kind).iter().any(|n| n == bare)) {
+        return Ok(bare);
+    }
+    let leaves: Vec<String> = [("A", LeafKind::Action), ("C", LeafKind::Condition)]
+        .into_iter()
+        .flat_map(|(prefix, kind)| {
+            catalog.names(kind).into_iter().map(move |n| format!("{prefix}-{n}"))
+        })
+        .collect();
+    Err(format!("the tree has no leaf {name} (its leaves: {})", leaves.join(" ")))
 }
 
 /// The replay's tick context: scripted results, and a log of what happened.
@@ -188,7 +221,7 @@ pub fn replay(
     script: &str,
     seed: u64,
 ) -> Result<String, Box<dyn std::error::Error + Send + Sync>> {
-    let ticks = parse_script(script_file, script)?;
+    let ticks = parse_script(script_file, script, catalog)?;
     let rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut tree = Tree::for_replay(tree_spec, LearnParams::greedy(), rng)?;
     let leaf_nodes: Vec<bool> = (0..tree.node_count() as NodeId).map(|n| tree.is_leaf(n)).collect();
@@ -226,4 +259,43 @@ pub fn replay(
         .expect("writing to a String");
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bt::parse::parse_tree;
+
+    /// The replay of `script` against a tree with a condition `done` and actions `report`
+    /// and `climb`.
+    fn replayed(script: &str) -> Result<String, String> {
+        let catalog = OpenCatalog::default();
+        let tree = "OR 2\n- AND 2\n-- C-done 0\n-- A-report 0\n- A-climb 0\n";
+        let tree = parse_tree("t.bt", tree, &catalog).unwrap();
+        replay(&tree, &catalog, "s.script", script, 0).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn a_script_naming_a_leaf_the_tree_lacks_is_refused_naming_it() {
+        let leaves = "(its leaves: A-report A-climb C-done)";
+        for (item, missing) in
+            [("C-nope=S", "C-nope"), ("nope=F", "nope"), ("C-climb=S", "C-climb")]
+        {
+            let e = replayed(&format!("done=F climb=R\n{item}\n")).unwrap_err();
+            assert_eq!(e, format!("s.script:2: `{item}`: the tree has no leaf {missing} {leaves}"));
+        }
+        assert!(replayed("C-done=F A-climb=R\n").is_ok(), "prefixed names of its leaves");
+    }
+
+    #[test]
+    fn a_leaf_or_default_given_twice_on_a_line_is_refused() {
+        for (line, item, what) in [
+            ("done=S done=F", "done=F", "leaf done"),
+            ("C-done=S done=F *=S", "done=F", "leaf done"),
+            ("*=S *=F", "*=F", "`*`"),
+        ] {
+            let e = replayed(&format!("{line}\n")).unwrap_err();
+            assert_eq!(e, format!("s.script:1: `{item}`: {what} is given twice on this line"));
+        }
+    }
 }
