@@ -42,31 +42,26 @@ const WAKE_SUPERVISOR: &str = "wake/supervisor";
 const PREFIX_HEAD: &str = "flockstep.";
 
 /// What can go wrong in the transport. Every variant names the run and, where there is one,
-/// the service involved.
+/// the service involved. A cause is in the message and not also a `source`: reports that
+/// follow the chain (`{:#}`) would print it twice.
 #[derive(Debug, thiserror::Error)]
 pub enum TransportError {
     #[error("invalid run id: {0}")]
     InvalidRunId(String),
-    #[error("run `{run}`: {what} failed: {source}")]
-    Setup {
-        run: String,
-        what: String,
-        #[source]
-        source: Box<dyn std::error::Error + Send + Sync>,
-    },
+    #[error("run `{run}`: {what} failed: {cause}")]
+    Setup { run: String, what: String, cause: Box<dyn std::error::Error + Send + Sync> },
     #[error("run `{run}`: no world created `{service}` within {waited:?}")]
     ServiceMissing { run: String, service: String, waited: Duration },
     #[error("run `{run}`: the world created no publisher on `{service}` within {waited:?}")]
     PublisherMissing { run: String, service: String, waited: Duration },
     #[error("run `{run}`: service `{service}` already exists: another live run uses this run id")]
     RunInUse { run: String, service: String },
-    #[error("run `{run}`: {op} on `{service}` failed: {source}")]
+    #[error("run `{run}`: {op} on `{service}` failed: {cause}")]
     Port {
         run: String,
         service: String,
         op: &'static str,
-        #[source]
-        source: Box<dyn std::error::Error + Send + Sync>,
+        cause: Box<dyn std::error::Error + Send + Sync>,
     },
     #[error("run `{run}`: `{service}` not drained for {waited:?}; stopping, not losing records")]
     ReportsStalled { run: String, service: String, waited: Duration },
@@ -78,12 +73,8 @@ pub enum TransportError {
     PeersMissing { run: String, missing: String, waited: Duration },
     #[error("parent process {parent} is gone (this process now belongs to {now})")]
     ParentGone { parent: u32, now: libc::pid_t },
-    #[error("{what} failed: {source}")]
-    Io {
-        what: String,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("{what} failed: {cause}")]
+    Io { what: String, cause: std::io::Error },
 }
 
 /// How a process wants SIGTERM and SIGINT handled while it uses the transport.
@@ -213,7 +204,7 @@ fn install_termination_signals(mode: SignalMode) -> Result<(), TransportError> {
     if failed {
         return Err(TransportError::Io {
             what: "installing the SIGTERM and SIGINT handlers".into(),
-            source: std::io::Error::last_os_error(),
+            cause: std::io::Error::last_os_error(),
         });
     }
     Ok(())
@@ -238,7 +229,7 @@ pub fn exit_with_parent(parent_pid: u32) -> Result<(), TransportError> {
     if rc != 0 {
         return Err(TransportError::Io {
             what: "prctl(PR_SET_PDEATHSIG)".into(),
-            source: std::io::Error::last_os_error(),
+            cause: std::io::Error::last_os_error(),
         });
     }
     // Checked after arming: a parent that died before the prctl would never signal us.
@@ -253,5 +244,5 @@ fn setup(
     what: impl Into<String>,
     e: impl std::error::Error + Send + Sync + 'static,
 ) -> TransportError {
-    TransportError::Setup { run: run.into(), what: what.into(), source: Box::new(e) }
+    TransportError::Setup { run: run.into(), what: what.into(), cause: Box::new(e) }
 }

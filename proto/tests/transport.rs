@@ -564,3 +564,14 @@ fn a_full_episode_buffer_fails_after_the_report_timeout_instead_of_dropping() {
     let error = world.flush_episodes().unwrap_err();
     assert!(matches!(error, TransportError::ReportsStalled { .. }), "{error}");
 }
+
+/// A transport error carries its cause in its message only: as a `source` too, reports that
+/// follow the chain (`{:#}`) printed it twice ("Permission denied (os error 13): Permission
+/// denied (os error 13)").
+#[test]
+fn an_error_says_its_cause_once() {
+    let cause = std::io::Error::from_raw_os_error(libc::EACCES);
+    let error = TransportError::Io { what: "listing /tmp/iceoryx2".into(), cause };
+    assert!(std::error::Error::source(&error).is_none());
+    assert_eq!(error.to_string(), "listing /tmp/iceoryx2 failed: Permission denied (os error 13)");
+}

@@ -80,8 +80,10 @@ pub enum MapErrorKind {
 /// Why a scenario could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum WorldError {
-    #[error("cannot read {}: {source}", .path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    /// The I/O error is in the message, not also a `source`: reports that follow the chain
+    /// would print it twice.
+    #[error("cannot read {}: {cause}", .path.display())]
+    Io { path: PathBuf, cause: std::io::Error },
     /// A `--scenario` that is neither a built-in name, nor a `gen:` spec, nor an existing file.
     #[error(
         "unknown scenario `{spec}`: expected s1, s2, s3, s4, a `gen:` spec or the path of a \

@@ -56,7 +56,7 @@ impl Scenario {
     /// at `path`.
     pub fn load(path: &Path) -> Result<Scenario, WorldError> {
         let text = crate::map::read_input(path)
-            .map_err(|source| WorldError::Io { path: path.to_path_buf(), source })?;
+            .map_err(|cause| WorldError::Io { path: path.to_path_buf(), cause })?;
         Scenario::from_text(&path.display().to_string(), &text)
     }
 
@@ -84,7 +84,7 @@ impl Scenario {
             return crate::generate::generate(spec);
         }
         Scenario::load(Path::new(spec)).map_err(|e| match e {
-            WorldError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+            WorldError::Io { cause, .. } if cause.kind() == std::io::ErrorKind::NotFound => {
                 WorldError::UnknownScenario { spec: spec.to_string() }
             }
             e => e,

@@ -61,8 +61,7 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
 }
 
 fn shm_unlink(name: &str) -> Result<(), TransportError> {
-    let io =
-        |source| TransportError::Io { what: format!("removing shared memory `{name}`"), source };
+    let io = |cause| TransportError::Io { what: format!("removing shared memory `{name}`"), cause };
     let c_name =
         std::ffi::CString::new(format!("/{name}")).map_err(|e| io(std::io::Error::other(e)))?;
     // SAFETY: a valid NUL-terminated name.
@@ -135,10 +134,10 @@ pub fn leftover_files(run_id: &str) -> Result<Vec<PathBuf>, TransportError> {
         let entries = match std::fs::read_dir(&dir) {
             Ok(entries) => entries,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(source) => {
+            Err(cause) => {
                 return Err(TransportError::Io {
                     what: format!("listing {}", dir.display()),
-                    source,
+                    cause,
                 })
             }
         };
@@ -176,9 +175,7 @@ fn dir_names(dir: &StdPath) -> Result<Vec<String>, TransportError> {
             Ok(entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
-        Err(source) => {
-            Err(TransportError::Io { what: format!("listing {}", dir.display()), source })
-        }
+        Err(cause) => Err(TransportError::Io { what: format!("listing {}", dir.display()), cause }),
     }
 }
 

@@ -210,7 +210,7 @@ fn port_error(
     op: &'static str,
     e: impl std::error::Error + Send + Sync + 'static,
 ) -> TransportError {
-    TransportError::Port { run: run.into(), service: service.into(), op, source: Box::new(e) }
+    TransportError::Port { run: run.into(), service: service.into(), op, cause: Box::new(e) }
 }
 
 /// Who is connected, as the world sees it.

@@ -306,7 +306,7 @@ impl ServiceFailure {
         TransportError::Setup {
             run: run.run_id.clone(),
             what: format!("{} service `{name}`", self.verb),
-            source: self.source,
+            cause: self.source,
         }
     }
 }

@@ -228,7 +228,7 @@ impl Waiter {
                 run: self.run_id.clone(),
                 service: self.service.clone(),
                 op: "waiting on the listener",
-                source: Box::new(e),
+                cause: Box::new(e),
             }),
         }
     }
