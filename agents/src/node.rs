@@ -14,7 +14,7 @@ use crate::agent::{AgentSpec, UavAgent};
 use crate::bt::render::to_text;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
-use crate::snapshot::{restore_snapshots, write_snapshot, write_snapshots};
+use crate::snapshot::{restore_snapshots, write_snapshot, write_snapshots, Learned};
 use crate::trace::Trace;
 use crate::uav::load_uav_tree;
 use anyhow::{bail, Context, Result};
@@ -470,7 +470,7 @@ fn hang(round: u64) -> ! {
 /// The agent with what it needs to save itself.
 struct Session {
     agent: UavAgent,
-    scenario: String,
+    scenario: Arc<Scenario>,
     comm: CommMode,
     tree_text: String,
     out: PathBuf,
@@ -513,14 +513,15 @@ impl Session {
                 bail!("--resume {}: no such directory", dir.display());
             }
             // A restart before the first periodic snapshot starts those trials afresh.
-            for trial in restore_snapshots(&mut agent, dir, scenario.name(), comm, &tree_text)? {
+            let learned = Learned { scenario: &scenario, comm, tree: &tree_text };
+            for trial in restore_snapshots(&mut agent, dir, &learned)? {
                 tracing::warn!(trial, "no snapshot for this trial: it starts from scratch");
             }
         }
         let saved = agent.trials().iter().map(|t| t.trained_episodes()).collect();
         Ok(Session {
             agent,
-            scenario: scenario.name().to_string(),
+            scenario,
             comm,
             tree_text,
             out: out.to_path_buf(),
@@ -529,8 +530,13 @@ impl Session {
         })
     }
 
+    /// What this agent's tables are learned on, as its snapshots say.
+    fn learned(&self) -> Learned<'_> {
+        Learned { scenario: &self.scenario, comm: self.comm, tree: &self.tree_text }
+    }
+
     fn save_all(&self) -> Result<()> {
-        write_snapshots(&self.agent, &self.out, &self.scenario, self.comm, &self.tree_text)
+        write_snapshots(&self.agent, &self.out, &self.learned())
             .with_context(|| format!("saving the Q-tables of UAV{}", self.agent.slot() + 1))
     }
 
@@ -548,8 +554,7 @@ impl Session {
                 continue;
             }
             self.saved[trial] = part.trained_episodes();
-            let written =
-                write_snapshot(part, &self.out, trial, &self.scenario, self.comm, &self.tree_text);
+            let written = write_snapshot(part, &self.out, trial, &self.learned());
             if let Err(e) = written {
                 tracing::warn!(trial, "snapshot not saved, the agent flies on: {e}");
             }

@@ -1,23 +1,37 @@
 //! Q-table snapshots: what one agent learned in one trial, as bytes (serde + bincode).
 //!
 //! A snapshot holds the state keys in id order and every learning selector's table, plus
-//! what it was learned on (scenario, slot, communication mode, tree), which is checked when
-//! it is loaded: a table learned on another tree or scenario is refused, not misread.
+//! what it was learned on (scenario name and map, slot, communication mode, tree), which is
+//! checked when it is loaded: a table learned on another tree or map is refused, not
+//! misread, also when the map's `name:` line is the same.
 
 use crate::agent::TrialAgent;
 use crate::comm::CommMode;
 use crate::learning::QTable;
 use crate::state::StateSpace;
+use flockstep_world::Scenario;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Format version; bump when the layout changes.
-pub const FORMAT: u32 = 1;
+/// Format version; bump when the layout changes. 2: the map's canonical text.
+pub const FORMAT: u32 = 2;
+
+/// What an agent's tables are learned on, and what a snapshot it loads must have been
+/// learned on too.
+#[derive(Debug, Clone, Copy)]
+pub struct Learned<'a> {
+    pub scenario: &'a Scenario,
+    pub comm: CommMode,
+    /// The tree in canonical text form.
+    pub tree: &'a str,
+}
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Snapshot {
     pub format: u32,
+    /// The scenario's name, and its map in canonical text form (as in a run's scenario.map).
     pub scenario: String,
+    pub map: String,
     /// Agent slot (0-based).
     pub slot: u32,
     pub trial: u32,
@@ -47,8 +61,11 @@ pub enum SnapshotError {
     /// The first line where the two trees' canonical texts differ (one node a line, in
     /// pre-order; a run's `tree.bt` is in this form), `None` past a tree's end: the whole
     /// trees would take a screen.
-    #[error("snapshot was learned with another tree: line {line} of their canonical form (as in a run's tree.bt) is {} in the snapshot's, {} in this agent's", tree_line(.found), tree_line(.expected))]
-    Tree { line: usize, found: Option<String>, expected: Option<String> },
+    #[error("snapshot was learned with another tree: {0}")]
+    Tree(TextDifference),
+    /// A map of the same name whose text differs (a copy of a map edited).
+    #[error("snapshot was learned on another map named `{name}`: {difference}")]
+    Map { name: String, difference: TextDifference },
     #[error("snapshot holds trial {found}, read here for trial {expected} (a renamed file?)")]
     Trial { found: u32, expected: usize },
     #[error("inconsistent snapshot: {0}")]
@@ -88,9 +105,7 @@ impl Snapshot {
         &self,
         agent: &mut TrialAgent,
         trial: usize,
-        scenario: &str,
-        comm: CommMode,
-        tree: &str,
+        learned: &Learned,
     ) -> Result<(), SnapshotError> {
         let check = |what, found: &str, expected: &str| {
             if found == expected {
@@ -103,13 +118,18 @@ impl Snapshot {
                 })
             }
         };
-        check("scenario", &self.scenario, scenario)?;
-        check("communication mode", self.comm.name(), comm.name())?;
+        check("scenario", &self.scenario, learned.scenario.name())?;
+        let map = learned.scenario.map().to_text();
+        if let Some(difference) = TextDifference::of(&self.map, &map, "") {
+            return Err(SnapshotError::Map { name: self.scenario.clone(), difference });
+        }
+        check("communication mode", self.comm.name(), learned.comm.name())?;
         if self.slot as usize != agent.slot() {
             return Err(SnapshotError::Slot { found: self.slot, expected: agent.slot() });
         }
-        if let Some(mismatch) = tree_mismatch(&self.tree, tree) {
-            return Err(mismatch);
+        let tree_bt = " (as in a run's tree.bt)";
+        if let Some(difference) = TextDifference::of(&self.tree, learned.tree, tree_bt) {
+            return Err(SnapshotError::Tree(difference));
         }
         if self.trial as usize != trial {
             return Err(SnapshotError::Trial { found: self.trial, expected: trial });
@@ -155,47 +175,57 @@ fn decode_cause(error: &bincode::error::DecodeError) -> String {
     }
 }
 
-/// The [`SnapshotError::Tree`] of canonical tree texts `found` (the snapshot's) and
-/// `expected` (the agent's) if they differ: the first line where they part.
-fn tree_mismatch(found: &str, expected: &str) -> Option<SnapshotError> {
-    // Split at every newline, not `lines()`: two different texts then differ in some part,
-    // a missing final newline included.
-    let (mut found_lines, mut expected_lines) = (found.split('\n'), expected.split('\n'));
-    for line in 1.. {
-        match (found_lines.next(), expected_lines.next()) {
-            (None, None) => break,
-            (f, e) if f != e => {
-                let (found, expected) = (f.map(str::to_string), e.map(str::to_string));
-                return Some(SnapshotError::Tree { line, found, expected });
-            }
-            _ => {}
-        }
-    }
-    None
+/// Where two canonical texts (a tree's, a map's: one item a line) first differ: the whole
+/// texts would take a screen.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("line {line} of their canonical form{where_seen} is {} in the snapshot's, {} in this agent's", quoted(.found), quoted(.expected))]
+pub struct TextDifference {
+    /// Where a user sees that form, if anywhere: " (as in a run's tree.bt)".
+    pub where_seen: &'static str,
+    pub line: usize,
+    /// The snapshot's line and the agent's, `None` past a text's end.
+    pub found: Option<String>,
+    pub expected: Option<String>,
 }
 
-/// One side of a [`SnapshotError::Tree`]: the line quoted, or "missing" past its tree's end.
-fn tree_line(line: &Option<String>) -> String {
+impl TextDifference {
+    /// The first line where `found` (the snapshot's) and `expected` (the agent's) part, if
+    /// they differ.
+    fn of(found: &str, expected: &str, where_seen: &'static str) -> Option<TextDifference> {
+        // Split at every newline, not `lines()`: two different texts then differ in some
+        // part, a missing final newline included.
+        let (mut found_lines, mut expected_lines) = (found.split('\n'), expected.split('\n'));
+        for line in 1.. {
+            match (found_lines.next(), expected_lines.next()) {
+                (None, None) => break,
+                (f, e) if f != e => {
+                    let (found, expected) = (f.map(str::to_string), e.map(str::to_string));
+                    return Some(TextDifference { where_seen, line, found, expected });
+                }
+                _ => {}
+            }
+        }
+        None
+    }
+}
+
+/// One side of a [`TextDifference`]: the line quoted, or "missing" past its text's end.
+fn quoted(line: &Option<String>) -> String {
     line.as_ref().map_or_else(|| "missing".to_string(), |line| format!("`{line}`"))
 }
 
 /// The bytes of a [`Snapshot`] of what `agent` has learned so far, encoded from the agent's
 /// own tables and keys: no copy of them, no vector per state (a snapshot is written while
 /// every process of the barrier waits).
-fn encode_snapshot(
-    agent: &TrialAgent,
-    scenario: &str,
-    trial: usize,
-    comm: CommMode,
-    tree: &str,
-) -> Vec<u8> {
+fn encode_snapshot(agent: &TrialAgent, trial: usize, learned: &Learned) -> Vec<u8> {
     let snapshot = SnapshotOf {
         format: FORMAT,
-        scenario,
+        scenario: learned.scenario.name(),
+        map: &learned.scenario.map().to_text(),
         slot: agent.slot() as u32,
         trial: trial as u32,
-        comm,
-        tree,
+        comm: learned.comm,
+        tree: learned.tree,
         episodes: agent.trained_episodes(),
         states: Keys(agent.states()),
         tables: agent.tree().tables(),
@@ -209,6 +239,7 @@ fn encode_snapshot(
 struct SnapshotOf<'a> {
     format: u32,
     scenario: &'a str,
+    map: &'a str,
     slot: u32,
     trial: u32,
     comm: CommMode,
@@ -247,13 +278,11 @@ pub fn write_snapshot(
     agent: &TrialAgent,
     out: &Path,
     trial: usize,
-    scenario: &str,
-    comm: CommMode,
-    tree: &str,
+    learned: &Learned,
 ) -> std::io::Result<()> {
     let path = snapshot_path(out, agent.slot(), trial);
     let partial = partial_path(&path);
-    let bytes = encode_snapshot(agent, scenario, trial, comm, tree);
+    let bytes = encode_snapshot(agent, trial, learned);
     // The directory is there but for the first snapshot: look for it only then.
     let write = || std::fs::write(&partial, &bytes);
     match write() {
@@ -301,12 +330,10 @@ fn in_file(path: &Path) -> impl FnOnce(SnapshotError) -> SnapshotError + '_ {
 pub fn write_snapshots(
     agent: &crate::agent::UavAgent,
     out: &Path,
-    scenario: &str,
-    comm: CommMode,
-    tree: &str,
+    learned: &Learned,
 ) -> std::io::Result<()> {
     for (trial, part) in agent.trials().iter().enumerate() {
-        write_snapshot(part, out, trial, scenario, comm, tree)?;
+        write_snapshot(part, out, trial, learned)?;
     }
     Ok(())
 }
@@ -316,18 +343,14 @@ pub fn write_snapshots(
 pub fn restore_snapshots(
     agent: &mut crate::agent::UavAgent,
     dir: &Path,
-    scenario: &str,
-    comm: CommMode,
-    tree: &str,
+    learned: &Learned,
 ) -> Result<Vec<usize>, SnapshotError> {
     let mut missing = Vec::new();
     let slot = agent.slot();
     for (trial, part) in agent.trials_mut().iter_mut().enumerate() {
         let path = snapshot_path(dir, slot, trial);
         match read_snapshot(&path)? {
-            Some(snapshot) => {
-                snapshot.restore(part, trial, scenario, comm, tree).map_err(in_file(&path))?
-            }
+            Some(snapshot) => snapshot.restore(part, trial, learned).map_err(in_file(&path))?,
             None => missing.push(trial),
         }
     }
@@ -346,25 +369,28 @@ mod tests {
     impl Snapshot {
         /// What `agent` has learned so far, built field by field: what the borrowed encoding
         /// must decode to.
-        fn of(
-            agent: &TrialAgent,
-            scenario: &str,
-            trial: usize,
-            comm: CommMode,
-            tree: &str,
-        ) -> Snapshot {
+        fn of(agent: &TrialAgent, trial: usize, learned: &Learned) -> Snapshot {
             Snapshot {
                 format: FORMAT,
-                scenario: scenario.to_string(),
+                scenario: learned.scenario.name().to_string(),
+                map: learned.scenario.map().to_text(),
                 slot: agent.slot() as u32,
                 trial: trial as u32,
-                comm,
-                tree: tree.to_string(),
+                comm: learned.comm,
+                tree: learned.tree.to_string(),
                 episodes: agent.trained_episodes(),
                 states: agent.states().keys().map(<[u64]>::to_vec).collect(),
                 tables: agent.tree().tables().into_iter().cloned().collect(),
             }
         }
+    }
+
+    static S3: std::sync::LazyLock<Scenario> =
+        std::sync::LazyLock::new(|| Scenario::resolve("s3").expect("s3 is built in"));
+
+    /// What the tests' tables are learned on: s3, flags, a stand-in tree text.
+    fn s3() -> Learned<'static> {
+        Learned { scenario: &S3, comm: CommMode::Flags, tree: "tree" }
     }
 
     fn uav1() -> UavAgent {
@@ -381,7 +407,7 @@ mod tests {
     }
 
     fn write(agent: &UavAgent, dir: &Path) -> PathBuf {
-        write_snapshot(&agent.trials()[0], dir, 0, "s3", CommMode::Flags, "tree").unwrap();
+        write_snapshot(&agent.trials()[0], dir, 0, &s3()).unwrap();
         snapshot_path(dir, 0, 0)
     }
 
@@ -394,7 +420,7 @@ mod tests {
         learn_one_state(&mut agent);
         write(&agent, dir.path());
         let read = read_snapshot(&path).unwrap().expect("the second snapshot");
-        assert_eq!(read, Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree"));
+        assert_eq!(read, Snapshot::of(&agent.trials()[0], 0, &s3()));
         assert_eq!(read.states.len(), 1);
         assert!(!partial_path(&path).exists(), "the partial file was renamed into place");
     }
@@ -417,9 +443,9 @@ mod tests {
         table.step(4, 2, -3.5, 1.0);
         table.step(1, 0, -0.25, 1.0);
         part.tree_mut().set_tables(vec![table]).unwrap();
-        let owned = Snapshot::of(part, "s3", 0, CommMode::Flags, "tree");
+        let owned = Snapshot::of(part, 0, &s3());
         let expected = bincode::serde::encode_to_vec(&owned, bincode::config::standard()).unwrap();
-        assert_eq!(encode_snapshot(part, "s3", 0, CommMode::Flags, "tree"), expected);
+        assert_eq!(encode_snapshot(part, 0, &s3()), expected);
         assert_eq!(owned.states.len(), 5);
         assert_eq!(owned.tables[0].get(4, 2), -3.5);
     }
@@ -431,7 +457,7 @@ mod tests {
         let path = write(&agent, dir.path());
         std::fs::rename(&path, partial_path(&path)).unwrap();
         let read = read_snapshot(&path).unwrap().expect("the complete partial file is used");
-        assert_eq!(read, Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree"));
+        assert_eq!(read, Snapshot::of(&agent.trials()[0], 0, &s3()));
     }
 
     #[test]
@@ -440,7 +466,7 @@ mod tests {
         let mut agent = uav1();
         let path = write(&agent, dir.path());
         learn_one_state(&mut agent);
-        let bytes = encode_snapshot(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let bytes = encode_snapshot(&agent.trials()[0], 0, &s3());
         std::fs::write(partial_path(&path), &bytes[..bytes.len() / 2]).unwrap();
         let read = read_snapshot(&path).unwrap().expect("the snapshot before the crash");
         assert!(read.states.is_empty(), "the torn write was read");
@@ -452,14 +478,11 @@ mod tests {
     fn a_snapshot_holding_a_non_finite_q_value_is_refused() {
         let mut agent = uav1();
         learn_one_state(&mut agent);
-        let mut snapshot = Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let mut snapshot = Snapshot::of(&agent.trials()[0], 0, &s3());
         let mut table = QTable::new(5);
         table.step(0, 3, f64::NAN, 1.0);
         snapshot.tables = vec![table];
-        let err = snapshot
-            .restore(&mut agent.trials_mut()[0], 0, "s3", CommMode::Flags, "tree")
-            .unwrap_err()
-            .to_string();
+        let err = snapshot.restore(&mut agent.trials_mut()[0], 0, &s3()).unwrap_err().to_string();
         assert_eq!(
             err,
             "inconsistent snapshot: learning selector 1: Q(state 0, child 4) is NaN; \
@@ -477,8 +500,7 @@ mod tests {
         agent.trials_mut()[0].set_trained_episodes(10_000);
         write(&agent, dir.path());
         let mut restarted = uav1();
-        let missing =
-            restore_snapshots(&mut restarted, dir.path(), "s3", CommMode::Flags, "tree").unwrap();
+        let missing = restore_snapshots(&mut restarted, dir.path(), &s3()).unwrap();
         assert!(missing.is_empty());
         assert_eq!(restarted.trials()[0].trained_episodes(), 10_000);
         let path = write(&restarted, dir.path());
@@ -491,11 +513,9 @@ mod tests {
     fn a_snapshot_of_another_trial_is_refused_naming_its_file() {
         let dir = tempfile::tempdir().unwrap();
         let agent = uav1();
-        write_snapshot(&agent.trials()[0], dir.path(), 3, "s3", CommMode::Flags, "tree").unwrap();
+        write_snapshot(&agent.trials()[0], dir.path(), 3, &s3()).unwrap();
         std::fs::rename(snapshot_path(dir.path(), 0, 3), snapshot_path(dir.path(), 0, 0)).unwrap();
-        let err = restore_snapshots(&mut uav1(), dir.path(), "s3", CommMode::Flags, "tree")
-            .unwrap_err()
-            .to_string();
+        let err = restore_snapshots(&mut uav1(), dir.path(), &s3()).unwrap_err().to_string();
         assert!(
             err.ends_with(
                 "uav1_trial0.bin: snapshot holds trial 3, read here for trial 0 (a renamed file?)"
@@ -508,10 +528,10 @@ mod tests {
     /// `change`.
     fn refusal(change: impl FnOnce(&mut Snapshot)) -> String {
         let mut agent = uav1();
-        let mut snapshot = Snapshot::of(&agent.trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let mut snapshot = Snapshot::of(&agent.trials()[0], 0, &s3());
         change(&mut snapshot);
         let part = &mut agent.trials_mut()[0];
-        snapshot.restore(part, 0, "s3", CommMode::Flags, "tree").unwrap_err().to_string()
+        snapshot.restore(part, 0, &s3()).unwrap_err().to_string()
     }
 
     /// Slots are numbered from 0 inside, UAVs from 1 for users. Before, the message said
@@ -538,10 +558,27 @@ mod tests {
         assert!(err.ends_with(end), "{err}");
     }
 
+    /// A map edited but for its `name:` line is another map: its tables are refused,
+    /// naming the first line that differs. Before, only the name was compared.
+    #[test]
+    fn a_snapshot_of_another_map_of_the_same_name_names_the_first_differing_line() {
+        let map = S3.map().to_text();
+        let line = map.split('\n').count();
+        let err = refusal(|snapshot| snapshot.map.push_str("UAV1: 0,0 0,1"));
+        assert_eq!(
+            err,
+            format!(
+                "snapshot was learned on another map named `{}`: line {line} of their canonical \
+                 form is `UAV1: 0,0 0,1` in the snapshot's, `` in this agent's",
+                S3.name()
+            )
+        );
+    }
+
     /// A cut file says "truncated". Before, it said bincode's `UnexpectedEnd { additional: 4 }`.
     #[test]
     fn a_truncated_snapshot_says_so_in_words() {
-        let bytes = encode_snapshot(&uav1().trials()[0], "s3", 0, CommMode::Flags, "tree");
+        let bytes = encode_snapshot(&uav1().trials()[0], 0, &s3());
         let err = Snapshot::decode(&bytes[..bytes.len() - 1]).unwrap_err().to_string();
         assert_eq!(err, "not a flockstep Q-table snapshot: truncated");
     }

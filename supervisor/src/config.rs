@@ -9,6 +9,7 @@ use flockstep_agents::bt::spec::TreeSpec;
 use flockstep_agents::bt::tree::Tree;
 use flockstep_agents::comm::CommMode;
 use flockstep_agents::learning::LearnParams;
+use flockstep_agents::snapshot::Learned;
 use flockstep_agents::uav::load_uav_tree;
 use flockstep_proto::{RunInfo, MAX_AGENTS, MAX_TRIALS, SCENARIO_BYTES};
 use flockstep_world::generate::GenSpec;
@@ -177,6 +178,12 @@ impl RunConfig {
     pub fn tree_text(&self) -> String {
         to_text(&self.tree)
     }
+
+    /// What this run's tables are learned on, its tree given in canonical text form
+    /// ([`RunConfig::tree_text`]): what its snapshots record and must match when loaded.
+    pub fn learned<'a>(&'a self, tree: &'a str) -> Learned<'a> {
+        Learned { scenario: &self.scenario, comm: self.comm, tree }
+    }
 }
 
 /// `--agent-timeout-ms` unless given: a round that waits this long for an agent is rare
@@ -336,9 +343,8 @@ fn check_snapshots(config: &RunConfig, dir: &Path, flag: &str) -> Result<()> {
     let tree = config.tree_text();
     for slot in 0..config.uavs {
         let mut agent = UavAgent::new(&config.agent_spec(slot))?;
-        let missing =
-            restore_snapshots(&mut agent, dir, config.scenario.name(), config.comm, &tree)
-                .with_context(|| format!("{flag} {}", dir.display()))?;
+        let missing = restore_snapshots(&mut agent, dir, &config.learned(&tree))
+            .with_context(|| format!("{flag} {}", dir.display()))?;
         if let Some(&trial) = missing.first() {
             bail!(
                 "{flag} {}: no snapshot {} (UAV{}, trial {trial})",

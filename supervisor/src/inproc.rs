@@ -81,7 +81,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     let tree = config.tree_text();
     if let Some(dir) = &config.resume {
         for agent in &mut simulation.agents {
-            restore_snapshots(agent, dir, config.scenario.name(), config.comm, &tree)?;
+            restore_snapshots(agent, dir, &config.learned(&tree))?;
         }
     }
     recorder.set_live(config.uavs);
@@ -104,9 +104,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     // result (an agent process that cannot write its tables fails a multi-process run too).
     let mut unsaved = Vec::new();
     for agent in &simulation.agents {
-        if let Err(e) =
-            write_snapshots(agent, &config.out, config.scenario.name(), config.comm, &tree)
-        {
+        if let Err(e) = write_snapshots(agent, &config.out, &config.learned(&tree)) {
             unsaved.push(format!("UAV{}: {e:#}", agent.slot() + 1));
         }
     }

@@ -2,8 +2,8 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    assert_nothing_left, episode_rows, error_line, first_gap, mean_length, number, run_fail,
-    run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
+    assert_nothing_left, episode_rows, error_line, first_gap, mean_length, number, read, repo_file,
+    run_fail, run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::time::Duration;
@@ -153,6 +153,15 @@ fn a_snapshot_that_does_not_fit_the_run_is_refused_in_one_line_before_it_starts(
         let expected = ["--resume", "uav1_trial0.bin", "learned with scenario"];
         refused(&[&args[..], &rest].concat(), &out, &expected);
     }
+    // A copy of s1 edited but for its name is another map (its name alone used to pass).
+    let edited = dir.path().join("s1-edited.map");
+    let s1 = String::from_utf8(read(&repo_file("world/maps/s1_one_uav_one_target.map"))).unwrap();
+    std::fs::write(&edited, s1.replacen("grid:\n.  ", "grid:\nX  ", 1)).unwrap();
+    let out = dir.path().join("edited").display().to_string();
+    let args = ["--scenario", &edited.display().to_string(), "--uavs", "1", "--trials", "1"];
+    let rest = ["--episodes", "5", "--resume", &qtables, "--out", &out, "--quiet"];
+    let expected = ["learned on another map named `s1_one_uav_one_target`: line 5 ", "`X  . "];
+    refused(&[&args[..], &rest].concat(), &out, &expected);
     let path = snapshot_path(dir.path(), 0, 0);
     let mut snapshot = read_snapshot(&path).expect("readable").expect("the run saved trial 0");
     snapshot.tables[0].step(0, 1, f64::NAN, 1.0);
