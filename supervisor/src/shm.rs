@@ -8,9 +8,9 @@
 //! process still runs (hung; the world names the process of each slot whenever the
 //! barrier's membership changes) is brought down and is then a failed agent too; a failed
 //! world ends the run at once, and so does an agent that fails in the barrier as the run
-//! ends (its final Q-tables are lost). Ctrl-C asks the world to stop at the end of the current round.
-//! Every child is finally brought down by the shutdown ladder and what is left of the run in
-//! shared memory removed.
+//! ends (its final Q-tables are lost). Ctrl-C asks the world to stop at the end of the
+//! current round. Every child is finally brought down by the shutdown ladder and what is
+//! left of the run in shared memory removed. Agents that attach and leave are noted too.
 
 use crate::children::{shut_down, Process, TERM_GRACE};
 use crate::cli::Restart;

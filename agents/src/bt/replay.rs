@@ -14,8 +14,9 @@
 //! Results are `S`, `F`, `R` (SUCCESS, FAILURE, RUNNING; conditions take `S` or `F`). A leaf
 //! name stands for every leaf of that name; the tree must have one (`A-name`, `C-name`: of
 //! that kind), and a line gives each leaf, and `*`, at most once. A leaf ticked without a
-//! result is an error that names the script line. Learning selectors order their children greedily by all-zero
-//! Q-values, so ties are broken by the seeded RNG (`--seed`) and the replay is repeatable.
+//! result is an error that names the script line. Learning selectors order their children
+//! greedily by all-zero Q-values, so ties are broken by the seeded RNG (`--seed`) and the
+//! replay is repeatable.
 //! The leaves command no UAV, so a run's limit of commands per tick does not apply here; a
 //! replay refuses a tree that may tick more than `MAX_REPLAY_ACTIONS` actions in one tick.
 //!
