@@ -4,8 +4,8 @@
 
 use crate::harness::{
     agent_pids, assert_nothing_left, assert_same_file, comm_entry, episode_rows, first_gap,
-    mean_length, read, read_trace, run_id, scratch, signal, summary, supervise, wait_for_agent,
-    wait_until, words, world_log, world_pids, Spawned, AGENT,
+    mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
+    wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
@@ -211,8 +211,7 @@ fn an_agent_that_dies_before_joining_is_restarted_from_empty_tables() {
     assert!(status.status.success(), "{report}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], true, "{s:#}");
-    let notes: Vec<&str> =
-        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    let notes = notes(&s);
     assert_eq!(notes.len(), 2, "one failure, one restart: {notes:?}");
     assert!(notes[0].starts_with("UAV2 failed") && notes[0].contains("SIGABRT"), "{notes:?}");
     assert_eq!(
@@ -428,8 +427,7 @@ fn an_agent_killed_in_the_final_evaluation_is_restarted_with_its_trained_tables(
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
     let s = summary(dir.path());
-    let notes: Vec<&str> =
-        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    let notes = notes(&s);
     assert_eq!(notes.len(), 2, "one failure, one restart: {notes:?}");
     assert_eq!(notes[1], "UAV1 restarted from its latest snapshot", "{notes:?}");
     for trial in 0..2 {
@@ -703,8 +701,7 @@ fn a_hung_agent_is_reported_and_restarted() {
     assert!(status.status.success(), "{report}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], true, "{s:#}");
-    let notes: Vec<&str> =
-        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    let notes = notes(&s);
     assert_eq!(notes.len(), 2, "one drop, one restart: {notes:?}");
     assert!(
         notes[0].starts_with("UAV2 was dropped by the world: silent past the deadline"),
@@ -840,8 +837,7 @@ fn an_agent_that_hangs_as_the_run_stops_is_dropped_and_brought_down() {
     assert_eq!(status.status.code(), Some(130), "Ctrl-C exits with 130\n{report}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], false, "{s:#}");
-    let notes: Vec<&str> =
-        s["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+    let notes = notes(&s);
     assert_eq!(notes.len(), 1, "one drop, not restarted: {notes:?}");
     assert!(
         notes[0].starts_with("UAV2 was dropped by the world: silent past the deadline")

@@ -85,6 +85,12 @@ pub fn summary(out: &Path) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
 }
 
+/// The `notes` of a `summary.json`, in order.
+pub fn notes(summary: &Value) -> Vec<&str> {
+    let notes = summary["notes"].as_array().unwrap_or_else(|| panic!("no notes: {summary:#}"));
+    notes.iter().filter_map(Value::as_str).collect()
+}
+
 /// `summary[key][index]` as f64.
 pub fn number(summary: &Value, key: &str, index: usize) -> f64 {
     summary[key][index]
