@@ -542,8 +542,6 @@ struct ReceivedBatch {
     batch: Sample<Ipc, EpisodeBatch, ()>,
     /// Records already handed out.
     handed_out: usize,
-    /// Its membership was looked at (after its records).
-    membership_read: bool,
 }
 
 /// What the world tells the supervisor, in the order it happened.
@@ -583,10 +581,9 @@ impl SupervisorPorts {
                     current.handed_out += 1;
                     return Ok(Some(FromWorld::Episode(*report)));
                 }
+                // Told once: once told, it is the membership last told.
                 let membership = current.batch.membership;
-                if !std::mem::replace(&mut current.membership_read, true)
-                    && membership != self.membership.get()
-                {
+                if membership != self.membership.get() {
                     self.membership.set(membership);
                     return Ok(Some(FromWorld::Membership(membership)));
                 }
@@ -594,9 +591,7 @@ impl SupervisorPorts {
             let next =
                 self.episodes.receive().map_err(|e| port_error(run, EPISODES, "receiving", e))?;
             match next {
-                Some(batch) => {
-                    *received = Some(ReceivedBatch { batch, handed_out: 0, membership_read: false })
-                }
+                Some(batch) => *received = Some(ReceivedBatch { batch, handed_out: 0 }),
                 None => {
                     *received = None;
                     return Ok(None);
