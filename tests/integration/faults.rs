@@ -7,6 +7,7 @@ use crate::harness::{
     mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
     wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
+use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
@@ -226,10 +227,7 @@ fn an_agent_that_dies_before_joining_is_restarted_from_empty_tables() {
         assert!(flown(2) > 1000, "trial {trial}: the restart flew {} episodes", flown(2));
     }
     for trial in 0..2 {
-        let name = format!("uav2_trial{trial}.bin");
-        let bytes = read(&dir.path().join("qtables").join(&name));
-        flockstep_agents::snapshot::Snapshot::decode(&bytes)
-            .unwrap_or_else(|e| panic!("the restart's final {name}: {e}"));
+        snapshot(dir.path(), 2, trial);
     }
     assert_nothing_left(&id);
 }
@@ -273,12 +271,8 @@ fn a_restarted_agent_goes_on_from_its_snapshot() {
         &out,
         &words("--scenario s3 --uavs 2 --episodes 12000 --trials 1 --seed 61 --restart on-failure --snapshot-every 200"),
     ));
-    let snapshot = dir.path().join("qtables").join("uav1_trial0.bin");
     wait_until("UAV1's snapshot after 3000 episodes", Duration::from_secs(60), || {
-        std::fs::read(&snapshot)
-            .ok()
-            .and_then(|b| flockstep_agents::snapshot::Snapshot::decode(&b).ok())
-            .is_some_and(|s| s.episodes >= 3000)
+        saved(dir.path(), 1, 0).is_some_and(|s| s.episodes >= 3000)
     });
     for pid in agent_pids(&id, 1) {
         signal(pid, libc::SIGKILL);
@@ -332,7 +326,7 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
             with_tables += 1;
             for name in ["uav1_trial0.bin", "uav2_trial1.bin"] {
                 let bytes = read(&dir.path().join("qtables").join(name));
-                flockstep_agents::snapshot::Snapshot::decode(&bytes)
+                Snapshot::decode(&bytes)
                     .unwrap_or_else(|e| panic!("attempt {attempt}: {name}: {e}"));
             }
         }
@@ -387,15 +381,21 @@ fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     assert_nothing_left(&id);
 }
 
+/// The path of agent `uav`'s (1-based) snapshot of `trial` under results directory `dir`.
+fn snapshot_file(dir: &std::path::Path, uav: usize, trial: usize) -> std::path::PathBuf {
+    dir.join("qtables").join(format!("uav{uav}_trial{trial}.bin"))
+}
+
 /// The snapshot of agent `uav` (1-based) in `trial` under results directory `dir`.
-fn snapshot(
-    dir: &std::path::Path,
-    uav: usize,
-    trial: usize,
-) -> flockstep_agents::snapshot::Snapshot {
-    let path = dir.join("qtables").join(format!("uav{uav}_trial{trial}.bin"));
-    flockstep_agents::snapshot::Snapshot::decode(&read(&path))
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+fn snapshot(dir: &std::path::Path, uav: usize, trial: usize) -> Snapshot {
+    let path = snapshot_file(dir, uav, trial);
+    Snapshot::decode(&read(&path)).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// That snapshot if it is there and complete yet, for a wait.
+fn saved(dir: &std::path::Path, uav: usize, trial: usize) -> Option<Snapshot> {
+    let bytes = std::fs::read(snapshot_file(dir, uav, trial)).ok()?;
+    Snapshot::decode(&bytes).ok()
 }
 
 /// An agent killed in the final greedy evaluation goes on, restarted, from the tables it
@@ -411,15 +411,8 @@ fn an_agent_killed_in_the_final_evaluation_is_restarted_with_its_trained_tables(
         &out,
         &words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed 82 --eval-episodes 20000 --tick-cap 100 --restart on-failure"),
     ));
-    let trained = |path: &std::path::Path| {
-        std::fs::read(path)
-            .ok()
-            .and_then(|b| flockstep_agents::snapshot::Snapshot::decode(&b).ok())
-            .is_some_and(|s| s.episodes == 1000)
-    };
-    let qtables = dir.path().join("qtables");
     wait_until("UAV1's tables saved as each trial's evaluation began", DEADLOCK, || {
-        (0..2).all(|trial| trained(&qtables.join(format!("uav1_trial{trial}.bin"))))
+        (0..2).all(|trial| saved(dir.path(), 1, trial).is_some_and(|s| s.episodes == 1000))
     });
     for pid in agent_pids(&id, 1) {
         signal(pid, libc::SIGKILL);
@@ -847,8 +840,6 @@ fn an_agent_that_hangs_as_the_run_stops_is_dropped_and_brought_down() {
                 || notes[0].ends_with("not restarted (the run has ended)")),
         "{notes:?}"
     );
-    let bytes = read(&dir.path().join("qtables").join("uav1_trial0.bin"));
-    flockstep_agents::snapshot::Snapshot::decode(&bytes)
-        .unwrap_or_else(|e| panic!("UAV1's final snapshot: {e}"));
+    snapshot(dir.path(), 1, 0);
     assert_nothing_left(&id);
 }
