@@ -1,6 +1,7 @@
 //! The supervisor's child processes: spawned with explicit arguments in their own process
 //! group (a terminal's Ctrl-C reaches only the supervisor, which stops the run in order),
-//! with their stderr in a log file, and shut down by a ladder: wait, SIGTERM, SIGKILL.
+//! with SIGINT ignored from before they run, with their stderr in a log file, and shut down
+//! by a ladder: wait, SIGTERM, SIGKILL.
 
 use anyhow::{Context, Result};
 use std::fs::File;
@@ -26,9 +27,20 @@ pub struct Process {
 
 /// How long a process has to leave after SIGTERM before it gets SIGKILL.
 pub const TERM_GRACE: Duration = Duration::from_secs(2);
+/// How long the shutdown ladder waits for SIGKILL to take effect (a process in
+/// uninterruptible sleep, e.g. on a hung disk, takes it late) before it gives up on it.
+const KILL_WAIT: Duration = Duration::from_secs(10);
 
 impl Process {
     /// Spawns `command` as `name`, its stdout and stderr going to `log`.
+    ///
+    /// A child leaves the supervisor's process group only once it runs, so a SIGINT sent to
+    /// that group (a terminal's Ctrl-C, coreutils `timeout`) may reach it before: with the
+    /// signal's default action restored for the new program, it would kill the child before
+    /// the child's own code ignores SIGINT. The child is therefore forked with SIGINT blocked
+    /// (a SIGINT that arrives then waits) and sets it to be ignored before it runs the
+    /// program, which discards a waiting one; the program then starts with it ignored and
+    /// unblocked. The supervisor's own SIGINT is meanwhile taken by its other threads.
     pub fn spawn(name: &str, mut command: Command, log: &Path) -> Result<Process> {
         let file =
             File::create(log).with_context(|| format!("cannot create log {}", log.display()))?;
@@ -39,8 +51,18 @@ impl Process {
             )
             .stderr(file)
             .process_group(0);
-        let child = command
-            .spawn()
+        // SAFETY: the closure runs in the forked child before `exec` and calls only
+        // async-signal-safe functions (sigaction through signal(2), sigprocmask).
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGINT, libc::SIG_IGN);
+                sigint_mask(libc::SIG_UNBLOCK)
+            });
+        }
+        sigint_mask(libc::SIG_BLOCK)?;
+        let spawned = command.spawn();
+        sigint_mask(libc::SIG_UNBLOCK)?;
+        let child = spawned
             .with_context(|| format!("cannot start {name} ({:?})", command.get_program()))?;
         Ok(Process {
             name: name.to_string(),
@@ -131,13 +153,35 @@ impl Process {
     }
 }
 
-/// Waits until every process has exited, for at most `grace`. True if all did.
-fn wait_all(processes: &mut [&mut Process], grace: Duration) -> Result<bool> {
-    let deadline = Instant::now() + grace;
+/// Blocks or unblocks (`how`) SIGINT for the calling thread, which a child forked from it
+/// inherits. Async-signal-safe.
+fn sigint_mask(how: libc::c_int) -> std::io::Result<()> {
+    // SAFETY: a sigset_t initialised by sigemptyset, valid pointers.
+    let code = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        libc::sigaddset(&mut set, libc::SIGINT);
+        libc::pthread_sigmask(how, &set, std::ptr::null_mut())
+    };
+    match code {
+        0 => Ok(()),
+        code => Err(std::io::Error::from_raw_os_error(code)),
+    }
+}
+
+/// Checks on every process until all have exited, for at most `wait`, taking `step` on each
+/// one still running at every look (nothing, or [`Process::bring_down`]). True if all did.
+fn until_exited(
+    processes: &mut [&mut Process],
+    wait: Duration,
+    step: fn(&mut Process),
+) -> Result<bool> {
+    let deadline = Instant::now() + wait;
     loop {
         let mut running = 0;
         for p in processes.iter_mut() {
             if p.status()?.is_none() {
+                step(p);
                 running += 1;
             }
         }
@@ -151,26 +195,56 @@ fn wait_all(processes: &mut [&mut Process], grace: Duration) -> Result<bool> {
     }
 }
 
-/// The shutdown ladder: let them leave for `grace`, then SIGTERM and wait [`TERM_GRACE`],
-/// then SIGKILL and wait until they are gone. Returns the names of those that had to be
-/// signalled.
+/// Brings every process that still runs down the ladder of [`Process::bring_down`] until all
+/// have exited: SIGTERM, then SIGKILL after [`TERM_GRACE`]. Bounded: `wait` in all. True if
+/// all did.
+pub fn bring_all_down(processes: &mut [&mut Process], wait: Duration) -> Result<bool> {
+    until_exited(processes, wait, Process::bring_down)
+}
+
+/// The shutdown ladder: let them leave for `grace`, then bring down those still running
+/// ([`bring_all_down`], SIGKILL given [`KILL_WAIT`] to take effect). Returns the names of
+/// those that had to be signalled.
 pub fn shut_down(processes: &mut [&mut Process], grace: Duration) -> Result<Vec<String>> {
-    let mut forced = Vec::new();
-    if wait_all(processes, grace)? {
-        return Ok(forced);
+    if until_exited(processes, grace, |_| {})? {
+        return Ok(Vec::new());
     }
+    let mut forced = Vec::new();
     for p in processes.iter_mut() {
         if p.status()?.is_none() {
             forced.push(p.name.clone());
-            p.signal(libc::SIGTERM);
         }
     }
-    if wait_all(processes, TERM_GRACE)? {
-        return Ok(forced);
-    }
-    for p in processes.iter_mut() {
-        p.signal(libc::SIGKILL);
-    }
-    wait_all(processes, Duration::from_secs(10))?;
+    bring_all_down(processes, TERM_GRACE + KILL_WAIT)?;
     Ok(forced)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The `SigBlk:` or `SigIgn:` mask of a `/proc/<pid>/status` text.
+    fn signal_mask(status: &str, field: &str) -> u64 {
+        let line = status.lines().find_map(|l| l.strip_prefix(field)).expect(field);
+        u64::from_str_radix(line.trim(), 16).expect("a hexadecimal mask")
+    }
+
+    /// The program a child runs starts with SIGINT ignored and not blocked, and the
+    /// supervisor's thread has SIGINT unblocked again after the spawn: the window in which a
+    /// group SIGINT could kill a child that has not left the group yet is closed.
+    #[test]
+    fn a_child_starts_with_sigint_ignored_and_unblocked() {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let log = dir.path().join("status.log");
+        let mut command = Command::new("cat");
+        command.arg("/proc/self/status");
+        let mut child = Process::spawn("cat", command, &log).expect("cat starts");
+        assert!(until_exited(&mut [&mut child], Duration::from_secs(30), |_| {}).unwrap());
+        let status = std::fs::read_to_string(&log).expect("the log");
+        let sigint = 1 << (libc::SIGINT - 1);
+        assert_ne!(signal_mask(&status, "SigIgn:") & sigint, 0, "ignored:\n{status}");
+        assert_eq!(signal_mask(&status, "SigBlk:") & sigint, 0, "not blocked:\n{status}");
+        let own = std::fs::read_to_string("/proc/thread-self/status").expect("own status");
+        assert_eq!(signal_mask(&own, "SigBlk:") & sigint, 0, "the caller's mask:\n{own}");
+    }
 }
