@@ -61,7 +61,7 @@ pub fn eval(
     out: Option<std::path::PathBuf>,
     transport: crate::cli::Transport,
     defaults: &crate::cli::RunArgs,
-    stop: &std::sync::atomic::AtomicBool,
+    stop: &crate::interrupt::Interrupts,
 ) -> Result<bool> {
     anyhow::ensure!(episodes > 0, "eval --episodes must be at least 1 (greedy episodes per trial)");
     let summary = crate::summary::summary_file(dir)?;

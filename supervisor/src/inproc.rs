@@ -3,13 +3,13 @@
 //! match byte for byte: it calls the same `World` and `UavAgent` code with the same messages.
 
 use crate::config::RunConfig;
+use crate::interrupt::Interrupts;
 use crate::recorder::Recorder;
 use anyhow::{Context, Result};
 use flockstep_agents::agent::UavAgent;
 use flockstep_agents::snapshot::{restore_snapshots, write_snapshots};
 use flockstep_proto::{Action, EpisodeReport, Observation, ObservationKind};
 use flockstep_world::sim::World;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Rounds between looks at the progress display. A look reads the clock (about 27 ns here),
 /// a tenth of a 1-trial round.
@@ -76,7 +76,7 @@ impl Simulation {
 }
 
 /// Runs the whole experiment; returns `true` if it ran to the end, `false` if stopped.
-pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Result<bool> {
+pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Result<bool> {
     let mut simulation = Simulation::new(config)?;
     let tree = config.tree_text();
     if let Some(dir) = &config.resume {
@@ -89,7 +89,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
         if simulation.act()? {
             break true;
         }
-        if stop.load(Ordering::Relaxed) {
+        if stop.stop_asked() {
             break false;
         }
         let round = simulation.round();

@@ -10,6 +10,7 @@ pub mod cli;
 pub mod config;
 pub mod curve;
 pub mod inproc;
+pub mod interrupt;
 pub mod plot;
 pub mod recorder;
 pub mod reproduce;
@@ -21,8 +22,7 @@ pub mod summary;
 use anyhow::Result;
 use cli::{Cli, Command};
 use flockstep_proto::output;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use interrupt::Interrupts;
 
 /// First argument that makes the supervisor's executable the world or an agent.
 pub const ROLE_WORLD: &str = "world";
@@ -65,35 +65,26 @@ fn dispatch(cli: Cli, run_flags: &[String]) -> Result<u8> {
             commands::plot(&curves, &out, &title).map(|()| 0)
         }
         Some(Command::Eval { qtables, episodes, out, transport, overwrite }) => {
-            let stop = stop_on_ctrl_c()?;
+            let stop = Interrupts::catch()?;
             let defaults = cli::RunArgs { overwrite, ..cli.run };
             let complete = commands::eval(&qtables, episodes, out, transport, &defaults, &stop)?;
             Ok(if complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
         Some(Command::Generate { spec, out }) => commands::generate(&spec, &out).map(|()| 0),
         Some(Command::Reproduce { figure, out, episodes, trials, seed, transport, overwrite }) => {
-            let stop = stop_on_ctrl_c()?;
+            let stop = Interrupts::catch()?;
             let base = cli::RunArgs { episodes, trials, seed, transport, overwrite, ..cli.run };
             let complete = reproduce::reproduce(figure, out, &base, &stop)?;
             Ok(if complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
         None => {
             let config = config::RunConfig::resolve(&cli.run)?;
-            let stop = stop_on_ctrl_c()?;
+            let stop = Interrupts::catch()?;
             let outcome = run::run_experiment(&config, &stop)?;
             output::line(&config.out.join("summary.json").display().to_string())?;
             Ok(if outcome.complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }
     }
-}
-
-/// Ctrl-C (and SIGTERM) set the returned flag: the run stops at the end of a round and
-/// writes what it has.
-fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))?;
-    Ok(stop)
 }
 
 mod commands;

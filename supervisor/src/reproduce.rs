@@ -6,6 +6,7 @@
 use crate::cli::{Figure, RunArgs};
 use crate::config::RunConfig;
 use crate::curve::read_smoothed;
+use crate::interrupt::Interrupts;
 use crate::plot::{plot_curves, Reference, Series};
 use crate::run::run_experiment;
 use anyhow::{Context, Result};
@@ -13,7 +14,6 @@ use flockstep_proto::output;
 use flockstep_world::optimum::{optimum, optimum_with_known_target};
 use flockstep_world::Scenario;
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
 
 /// One experiment of a figure: (directory name, label, scenario, UAVs, communication).
 type Experiment = (&'static str, &'static str, &'static str, usize, &'static str);
@@ -29,7 +29,7 @@ pub fn reproduce(
     figure: Figure,
     out: Option<PathBuf>,
     base: &RunArgs,
-    stop: &AtomicBool,
+    stop: &Interrupts,
 ) -> Result<bool> {
     let (name, experiments) = match figure {
         Figure::Fig10 => ("fig10", FIG10),

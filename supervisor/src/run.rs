@@ -5,6 +5,7 @@
 use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::curve;
+use crate::interrupt::Interrupts;
 use crate::plot::{plot_curves, Reference, Series};
 use crate::recorder::Recorder;
 use crate::results::{Collector, EvalPlan};
@@ -12,7 +13,6 @@ use crate::summary;
 use anyhow::{Context, Result};
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// How a run ended. What went wrong on the way but did not stop it (lost agents...) is in
@@ -51,7 +51,7 @@ fn vm_hwm_kib(status: &str) -> Option<u64> {
     line.trim().strip_suffix("kB")?.trim().parse().ok()
 }
 
-pub fn run_experiment(config: &RunConfig, stop: &AtomicBool) -> Result<Outcome> {
+pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> {
     if config.transport == Transport::Shm {
         // Before anything is written or started: this run would read the other's records.
         crate::shm::refuse_run_id_in_use(&config.run_id)?;

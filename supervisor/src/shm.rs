@@ -12,9 +12,10 @@
 //! current round. Every child is finally brought down by the shutdown ladder and what is
 //! left of the run in shared memory removed. Agents that attach and leave are noted too.
 
-use crate::children::{shut_down, Process, TERM_GRACE};
+use crate::children::{bring_all_down, shut_down, Process, TERM_GRACE};
 use crate::cli::Restart;
 use crate::config::RunConfig;
+use crate::interrupt::Interrupts;
 use crate::recorder::Recorder;
 use crate::run::Outcome;
 use anyhow::{bail, Context, Result};
@@ -27,7 +28,6 @@ use flockstep_proto::transport::{
 use flockstep_proto::{Membership, MAX_AGENTS};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// How long the world may take to create the run's services.
@@ -37,7 +37,7 @@ const GRACE: Duration = Duration::from_secs(10);
 /// Restarts of one agent before the supervisor gives up on it.
 const MAX_RESTARTS: u32 = 5;
 
-pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Result<Outcome> {
+pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Result<Outcome> {
     let swept = sweep_stale_runs().context("cleaning stale resources of earlier runs")?;
     if !swept.runs_cleaned.is_empty() {
         tracing::info!(runs = ?swept.runs_cleaned, "removed stale resources of dead runs");
@@ -68,9 +68,7 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &AtomicBool) -> Re
     });
     // A failed run brings its children down at once; a finished one lets them leave.
     let grace = if result.is_ok() { GRACE } else { Duration::ZERO };
-    let mut processes: Vec<&mut Process> = std::iter::once(&mut fleet.world)
-        .chain(fleet.agents.iter_mut().map(|agent| &mut agent.process))
-        .collect();
+    let mut processes: Vec<&mut Process> = fleet.processes().collect();
     let forced = shut_down(&mut processes, grace)?;
     cleanup_run(&config.run_id).context("removing the run's shared-memory resources")?;
     let mut outcome = result?;
@@ -151,6 +149,13 @@ enum Seat {
     Dropped,
 }
 
+impl AgentProcess {
+    /// Whether the supervisor brings it down: the world dropped it, or it began to already.
+    fn to_bring_down(&self) -> bool {
+        self.process.brought_down() || self.seat == Seat::Dropped
+    }
+}
+
 impl Seat {
     /// The seat after a change of membership; `held`: the world names this process as the
     /// agent of its slot.
@@ -212,17 +217,13 @@ impl Fleet<'_> {
     /// failed agent like any other, reported and, if asked, restarted. Those being brought
     /// down are taken a step further (SIGKILL after SIGTERM's grace). Also once the run
     /// stops: a dropped agent is outside the barrier, with no last answer to give.
-    /// Returns whether any is still being brought down.
-    fn bring_down_dropped(&mut self) -> Result<bool> {
-        let mut running = false;
-        for AgentProcess { process, seat, .. } in &mut self.agents {
-            let due = process.brought_down() || *seat == Seat::Dropped;
-            if due && !process.exited() && process.status()?.is_none() {
-                process.bring_down();
-                running = true;
+    fn bring_down_dropped(&mut self) -> Result<()> {
+        for agent in &mut self.agents {
+            if agent.to_bring_down() && agent.process.status()?.is_none() {
+                agent.process.bring_down();
             }
         }
-        Ok(running)
+        Ok(())
     }
 
     /// Finishes bringing down the dropped agent processes (see [`Fleet::bring_down_dropped`])
@@ -230,10 +231,13 @@ impl Fleet<'_> {
     /// ladder would first give them its grace. Bounded: SIGTERM's grace and a second for
     /// SIGKILL to take effect, then they are left to the ladder.
     fn finish_bringing_down(&mut self) -> Result<()> {
-        let deadline = Instant::now() + TERM_GRACE + Duration::from_secs(1);
-        while self.bring_down_dropped()? && Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        let mut due: Vec<&mut Process> = self
+            .agents
+            .iter_mut()
+            .filter(|agent| agent.to_bring_down())
+            .map(|agent| &mut agent.process)
+            .collect();
+        bring_all_down(&mut due, TERM_GRACE + Duration::from_secs(1))?;
         Ok(())
     }
 
@@ -245,7 +249,7 @@ impl Fleet<'_> {
         &mut self,
         ports: &SupervisorPorts,
         recorder: &mut Recorder,
-        stop: &AtomicBool,
+        stop: &Interrupts,
     ) -> Result<Outcome> {
         // Everything told to the world so far; each message repeats it all.
         let mut control = Control::default();
@@ -254,15 +258,27 @@ impl Fleet<'_> {
         loop {
             self.record_reports(ports, recorder)?;
             recorder.redraw();
-            if stop.load(Ordering::Relaxed) && control.stop == 0 {
+            if stop.stop_asked() && control.stop == 0 {
                 control.stop = 1;
                 ports.send_control(&control)?;
                 // The stop round waits for every agent's final tables: up to 30 s for one
                 // that hangs, so say what is going on.
-                recorder.say("stopping: every agent saves its Q-tables in the next round");
+                recorder.say(
+                    "stopping: every agent saves its Q-tables in the next round (Ctrl-C again \
+                     to stop at once)",
+                );
+            }
+            if stop.hurry_asked() {
+                if !self.world.brought_down() {
+                    recorder.say("stopping at once: every process is told to leave now (an agent saves its Q-tables as it leaves)");
+                }
+                self.hurry()?;
             }
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
+                if self.world.brought_down() {
+                    return self.finish_hurrying(recorder);
+                }
                 if !status.success() {
                     // An agent may have failed since the last look, and be why the world did.
                     let late = self.newly_failed_agents()?;
@@ -278,6 +294,11 @@ impl Fleet<'_> {
                     recorder.note(format!("{note}; not restarted (the run has ended)"));
                 }
                 return Ok(Outcome { complete: control.stop == 0, peak_rss_kib: vec![] });
+            }
+            if stop.hurry_asked() {
+                // Every process is being brought down: none failed, none is restarted.
+                ports.waiter().sleep(DRAIN_EVERY)?;
+                continue;
             }
             self.bring_down_dropped()?;
             for (slot, note) in self.newly_failed_agents()? {
@@ -309,6 +330,49 @@ impl Fleet<'_> {
             // the CPU dozens of times per record, CPU the world and the agents need.
             ports.waiter().sleep(DRAIN_EVERY)?;
         }
+    }
+
+    /// Every process of the run: the world, then the agents in the order they were started.
+    fn processes(&mut self) -> impl Iterator<Item = &mut Process> {
+        std::iter::once(&mut self.world).chain(self.agents.iter_mut().map(|a| &mut a.process))
+    }
+
+    /// Takes every process that still runs a step down the shutdown ladder, without the stop
+    /// round (a second Ctrl-C): the world leaves at once; an agent leaves at its next wait
+    /// and saves its tables first (or, hung, gets SIGKILL after SIGTERM's grace).
+    fn hurry(&mut self) -> Result<()> {
+        for process in self.processes() {
+            if process.status()?.is_none() {
+                process.bring_down();
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends a run stopped at once, once the world has left: brings the agents down (bounded
+    /// as in [`Fleet::finish_bringing_down`]) and notes how each one that had not already
+    /// failed left, with its last words (where its tables are, or why they are not).
+    fn finish_hurrying(&mut self, recorder: &mut Recorder) -> Result<Outcome> {
+        let mut agents: Vec<&mut Process> =
+            self.agents.iter_mut().map(|agent| &mut agent.process).collect();
+        bring_all_down(&mut agents, TERM_GRACE + Duration::from_secs(1))?;
+        recorder.note(
+            "stopped at once by a second Ctrl-C or SIGTERM: the processes left without the \
+             stop round, each at its next wait"
+                .to_string(),
+        );
+        for AgentProcess { process, noted, .. } in &mut self.agents {
+            let Some(status) = process.status()? else { continue };
+            if !status.success() && !*noted {
+                *noted = true;
+                recorder.note(format!(
+                    "{} left ({status}): {}",
+                    process.name,
+                    process.last_words()
+                ));
+            }
+        }
+        Ok(Outcome { complete: false, peak_rss_kib: vec![] })
     }
 
     /// The agent processes that failed since the last call, with their slot and a note

@@ -843,3 +843,39 @@ fn an_agent_that_hangs_as_the_run_stops_is_dropped_and_brought_down() {
     snapshot(dir.path(), 1, 0);
     assert_nothing_left(&id);
 }
+
+/// A second Ctrl-C stops at once: an agent that hangs in the stop round no longer holds the
+/// run for the world's stop-round deadline (30 s) and then fails it. The world and the hung
+/// agent are brought down, the run ends as stopped (130) with every result written, and the
+/// notes say how it ended; the other agent had saved its final tables in the stop round.
+#[test]
+fn a_second_ctrl_c_stops_at_once_without_waiting_for_a_hung_agent() {
+    let dir = scratch();
+    let (id, out) = (run_id("hurry"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words(
+            "--scenario s3 --uavs 2 --episodes 50000 --trials 1 --seed 99 --fault 2=hang-at-stop",
+        ),
+    ));
+    wait_for_agent(&id, 2);
+    run.interrupt();
+    let log = dir.path().join("logs").join("uav2.log");
+    wait_until("UAV2 to hang in the stop round", DEADLOCK, || {
+        std::fs::read_to_string(&log).is_ok_and(|text| text.contains("hanging here"))
+    });
+    run.interrupt();
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "stopped, not failed\n{report}");
+    let world = world_log(dir.path());
+    assert!(!world.contains("did not answer the stop round"), "the world waited it out: {world}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false, "{s:#}");
+    let notes = notes(&s);
+    assert!(notes.iter().any(|n| n.starts_with("stopped at once by a second Ctrl-C")), "{notes:?}");
+    assert!(notes.iter().any(|n| n.starts_with("UAV2 left (exit status: 1)")), "{notes:?}");
+    assert!(!notes.iter().any(|n| n.starts_with("UAV1")), "UAV1 left in order: {notes:?}");
+    snapshot(dir.path(), 1, 0);
+    assert_nothing_left(&id);
+}
