@@ -133,6 +133,16 @@ impl Process {
         self.terminated_at.is_some()
     }
 
+    /// Stops the process (SIGSTOP) until [`Process::resume`]; see [`crate::suspend`].
+    pub fn pause(&self) {
+        self.signal(libc::SIGSTOP);
+    }
+
+    /// Continues a process [`Process::pause`] stopped (SIGCONT).
+    pub fn resume(&self) {
+        self.signal(libc::SIGCONT);
+    }
+
     /// The last error line the process logged (or its last line), for error messages.
     pub fn last_words(&self) -> String {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();

@@ -18,6 +18,7 @@ pub mod results;
 pub mod run;
 pub mod shm;
 pub mod summary;
+pub mod suspend;
 
 use anyhow::Result;
 use cli::{Cli, Command};

@@ -18,6 +18,7 @@ use crate::config::RunConfig;
 use crate::interrupt::Interrupts;
 use crate::recorder::Recorder;
 use crate::run::Outcome;
+use crate::suspend::SuspendOnCtrlZ;
 use anyhow::{bail, Context, Result};
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use flockstep_proto::supervisor_to_world::Control;
@@ -50,9 +51,12 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
     if let Some(dir) = &config.trace_dir {
         create_trace_files(dir, config.uavs)?;
     }
+    // Before the first child starts: a Ctrl-Z from then on waits for the run to pause it.
+    let ctrl_z = SuspendOnCtrlZ::catch().context("catching Ctrl-Z (SIGTSTP)")?;
     let world = Process::spawn("world", world_command(config)?, &logs.join("world.log"))?;
     let mut fleet = Fleet {
         config,
+        ctrl_z,
         world,
         agents: Vec::new(),
         restarts: vec![0; config.uavs],
@@ -116,6 +120,7 @@ fn count(n: usize, thing: &str) -> String {
 /// The world and the agent processes of a run.
 struct Fleet<'a> {
     config: &'a RunConfig,
+    ctrl_z: SuspendOnCtrlZ,
     world: Process,
     /// Every agent process started, restarts included, in the order they were started.
     agents: Vec<AgentProcess>,
@@ -268,6 +273,9 @@ impl Fleet<'_> {
                      to stop at once)",
                 );
             }
+            if self.ctrl_z.requested() {
+                self.pause(recorder)?;
+            }
             if stop.hurry_asked() {
                 if !self.world.brought_down() {
                     recorder.say("stopping at once: every process is told to leave now (an agent saves its Q-tables as it leaves)");
@@ -335,6 +343,28 @@ impl Fleet<'_> {
     /// Every process of the run: the world, then the agents in the order they were started.
     fn processes(&mut self) -> impl Iterator<Item = &mut Process> {
         std::iter::once(&mut self.world).chain(self.agents.iter_mut().map(|a| &mut a.process))
+    }
+
+    /// Ctrl-Z: stops the world and the agents, then the supervisor itself; once continued,
+    /// continues the agents, then the world (see [`crate::suspend`]), and notes the pause
+    /// (the run's timings include it).
+    fn pause(&mut self, recorder: &mut Recorder) -> Result<()> {
+        recorder.say("pausing (Ctrl-Z): the world and the agents stop with the supervisor");
+        for process in self.processes() {
+            if process.status()?.is_none() {
+                process.pause();
+            }
+        }
+        let paused = self.ctrl_z.stop_self();
+        let processes: Vec<&mut Process> = self.processes().collect();
+        for process in processes.iter().rev() {
+            process.resume();
+        }
+        recorder.note(format!(
+            "paused for {:.1} s by Ctrl-Z (the timings include it)",
+            paused.as_secs_f64()
+        ));
+        Ok(())
     }
 
     /// Takes every process that still runs a step down the shutdown ladder, without the stop

@@ -3,8 +3,8 @@
 //! run that does not finish in time fails the test with how far it got.
 
 use crate::harness::{
-    agent_pids, assert_nothing_left, assert_same_file, comm_entry, episode_rows, first_gap,
-    mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
+    agent_pids, assert_nothing_left, assert_same_file, catches, comm_entry, episode_rows,
+    first_gap, mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
     wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
 use flockstep_agents::snapshot::Snapshot;
@@ -877,5 +877,51 @@ fn a_second_ctrl_c_stops_at_once_without_waiting_for_a_hung_agent() {
     assert!(notes.iter().any(|n| n.starts_with("UAV2 left (exit status: 1)")), "{notes:?}");
     assert!(!notes.iter().any(|n| n.starts_with("UAV1")), "UAV1 left in order: {notes:?}");
     snapshot(dir.path(), 1, 0);
+    assert_nothing_left(&id);
+}
+
+/// The one-letter state of process `pid` (`R`, `S`, `T` for stopped, ...), or None once it
+/// is gone.
+fn process_state(pid: u32) -> Option<char> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The state follows the parenthesised command name, which may hold spaces.
+    stat.rsplit_once(") ").and_then(|(_, rest)| rest.chars().next())
+}
+
+/// Ctrl-Z pauses the whole run: the supervisor stops its world and agents, then itself, and
+/// once continued it continues them. The pause outlasts the agents' deadline
+/// (`--agent-timeout-ms 100`) many times, yet no agent is presumed dead: the run resumes
+/// where it was and learns exactly what an unpaused run learns (the in-process run of the
+/// same seed), and the pause is noted.
+#[test]
+fn ctrl_z_pauses_the_whole_run_and_it_resumes_where_it_was() {
+    let (dir, inproc) = (scratch(), scratch());
+    let (id, out) = (run_id("ctrl-z"), dir.path().display().to_string());
+    let args = words("--scenario s3 --uavs 2 --episodes 50000 --trials 1 --seed 61");
+    let timeout = words("--agent-timeout-ms 100");
+    let run = Spawned::supervisor(&run_args(&id, &out, &[&args[..], &timeout[..]].concat()));
+    let mut pids = vec![run.pid()];
+    pids.extend(wait_for_agent(&id, 1));
+    pids.extend(wait_for_agent(&id, 2));
+    pids.extend(world_pids(&id));
+    wait_until("the supervisor to catch Ctrl-Z", DEADLOCK, || catches(run.pid(), libc::SIGTSTP));
+    signal(run.pid(), libc::SIGTSTP);
+    wait_until("every process of the run to stop", DEADLOCK, || {
+        pids.iter().all(|&pid| process_state(pid) == Some('T'))
+    });
+    // The pause itself, held past the waits' allowance for a stopped process (PAUSE_GAP).
+    std::thread::sleep(Duration::from_millis(1500));
+    signal(run.pid(), libc::SIGCONT);
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], true, "{s:#}");
+    let notes = notes(&s);
+    assert!(
+        notes.len() == 1 && notes[0].starts_with("paused for ") && notes[0].contains("Ctrl-Z"),
+        "only the pause is noted: {notes:?}"
+    );
+    supervise(inproc.path(), &[&args[..], &words("--transport inproc")].concat());
+    assert_same_file(&dir.path().join("episodes.csv"), &inproc.path().join("episodes.csv"));
     assert_nothing_left(&id);
 }

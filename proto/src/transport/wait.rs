@@ -53,6 +53,15 @@ pub const STALLS_TO_BACK_OFF: u32 = 3;
 /// See [`STALLS_TO_BACK_OFF`].
 pub const STALL_WINDOW: Duration = Duration::from_millis(50);
 
+/// A look at the clock this much later than the waiter's own block explains means the
+/// process did not run in between: stopped (SIGSTOP, or Ctrl-Z, which the supervisor passes
+/// on to the whole run) or the machine suspended. That time does not count against a
+/// wait's deadline: a paused run resumes where it was instead of every process presuming
+/// its peers dead (they were paused too, and get as long to answer as before). A process
+/// that runs while its peer is stopped still sees the peer silent. A time slice lost to
+/// other processes, a few milliseconds even on a loaded machine, stays well below it.
+pub const PAUSE_GAP: Duration = Duration::from_secs(1);
+
 impl WaitPolicy {
     /// Blocks on the event at once: the least CPU, the most wake-up latency.
     pub const BLOCK: WaitPolicy = WaitPolicy {
@@ -191,7 +200,8 @@ impl Waiter {
     }
 
     /// The blocking phase of [`Self::wait`]: polls, then blocks on the listener in slices,
-    /// until `poll` has something or `timeout` (from `start`) passes.
+    /// until `poll` has something or `timeout` (from `start`, less the time the process was
+    /// paused, see [`PAUSE_GAP`]) passes.
     fn block<T>(
         &self,
         what: &dyn Display,
@@ -199,11 +209,20 @@ impl Waiter {
         start: Instant,
         mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
     ) -> Result<T, TransportError> {
+        let mut last_look = start;
+        let mut paused = Duration::ZERO;
         loop {
             if let Some(found) = poll()? {
                 return Ok(found);
             }
-            let waited = start.elapsed();
+            let now = Instant::now();
+            let gap = now - last_look;
+            // At most one slice was slept since the last look (none before the first).
+            if gap > self.policy.slice + PAUSE_GAP {
+                paused += gap - self.policy.slice;
+            }
+            last_look = now;
+            let waited = (now - start).saturating_sub(paused);
             if waited >= timeout {
                 return Err(TransportError::Timeout {
                     run: self.run_id.clone(),
@@ -315,6 +334,28 @@ mod tests {
             }
             other => panic!("nothing to find ends in a timeout: {other:?}"),
         }
+    }
+
+    /// A process stopped in the middle of a wait (here: a poll that takes longer than
+    /// [`PAUSE_GAP`], as the look after a SIGSTOP does) does not have that time counted
+    /// against the deadline; a gap below it still counts.
+    #[test]
+    fn time_the_waiter_was_stopped_does_not_count_against_its_deadline() {
+        let ports = world_waiting_with("paused", WaitPolicy::BLOCK);
+        let wait_across = |gap: Duration| {
+            let mut polls = 0u32;
+            ports.waiter().wait(&"an answer", Duration::from_millis(300), || {
+                polls += 1;
+                if polls == 2 {
+                    std::thread::sleep(gap);
+                }
+                Ok((polls == 4).then_some(polls))
+            })
+        };
+        let paused = wait_across(PAUSE_GAP + Duration::from_millis(500));
+        assert_eq!(paused.expect("the pause is not waiting"), 4);
+        let slow = wait_across(Duration::from_millis(400));
+        assert!(matches!(slow, Err(TransportError::Timeout { .. })), "{slow:?}");
     }
 
     /// After `stalls` waits whose yielding stalled, a wait with an answer on its third poll:
