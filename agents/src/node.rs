@@ -274,6 +274,14 @@ fn serve(
             )?;
         }
     }
+    if let Some(dir) = &learner.resume {
+        // A directory without a trial's snapshot is normal (a restart before the first
+        // one); a directory that is not there is a mistake, not a fresh start. Checked
+        // before joining: the mistake must not take a route, even for a moment.
+        if !dir.is_dir() {
+            bail!("--resume {}: no such directory", dir.display());
+        }
+    }
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
     let setup = match setup {
@@ -507,11 +515,6 @@ impl Session {
         };
         let mut agent = UavAgent::new(&spec)?;
         if let Some(dir) = &learner.resume {
-            // A directory without a trial's snapshot is normal (a restart before the first
-            // one); a directory that is not there is a mistake, not a fresh start.
-            if !dir.is_dir() {
-                bail!("--resume {}: no such directory", dir.display());
-            }
             // A restart before the first periodic snapshot starts those trials afresh.
             let learned = Learned { scenario: &scenario, comm, tree: &tree_text };
             for trial in restore_snapshots(&mut agent, dir, &learned)? {

@@ -99,3 +99,49 @@ fn attaching_to_a_run_that_is_not_running_waits_the_world_timeout() {
     assert!(waited < Duration::from_secs(5), "the agent took {waited:?} to give up\n{report}");
     assert_nothing_left(&id);
 }
+
+/// An attaching agent whose `--resume` names no directory exits saying so before it asks to
+/// join: before, it was admitted on the free route first and the run noted it as an agent
+/// that attached and left.
+#[test]
+fn an_agent_with_a_missing_resume_directory_exits_before_it_joins() {
+    let dir = scratch();
+    let (id, out) = (run_id("resume-missing"), dir.path().display().to_string());
+    // s4 has three routes: the third is free for an attaching agent.
+    let run = Spawned::start(
+        SUPERVISOR,
+        &[
+            "--transport",
+            "shm",
+            "--run-id",
+            &id,
+            "--out",
+            &out,
+            "--quiet",
+            "--scenario",
+            "s4",
+            "--uavs",
+            "2",
+            "--episodes",
+            "10000000",
+            "--trials",
+            "1",
+        ],
+    );
+    wait_for_agent(&id, 2);
+    let missing = dir.path().join("no-such-run");
+    let args = ["--attach", &id, "--out", &out, "--resume", &missing.display().to_string()];
+    let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
+    assert!(!output.status.success(), "expected a refusal\n{report}");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let expected = format!("agent: error: --resume {}: no such directory", missing.display());
+    assert_eq!(stderr.trim(), expected, "\n{report}");
+    run.interrupt();
+    let (status, report) = run.finish(BOUND);
+    assert_eq!(status.status.code(), Some(130), "the run ends only on Ctrl-C\n{report}");
+    let log = world_log(dir.path());
+    assert!(!log.contains("uav=3"), "the agent took route 3:\n{log}");
+    let s = crate::harness::summary(dir.path());
+    assert_eq!(s["notes"], serde_json::json!([]), "{s:#}");
+    assert_nothing_left(&id);
+}
