@@ -14,6 +14,7 @@
 
 mod cleanup;
 mod ports;
+mod root;
 mod run_services;
 mod wait;
 
@@ -22,12 +23,14 @@ pub use ports::{
     ActionLoan, ActionSample, AgentPorts, FromWorld, ObservationSample, Peers, SenderNode,
     SupervisorPorts, WorldPorts, EPISODE_WAKE_EVERY,
 };
+pub use root::iceoryx_root;
 pub use run_services::{RunServices, EPISODE_BUFFER, MAX_NODES, SPARE};
 pub use wait::{WaitPolicy, Waiter};
 
 use crate::services;
 use cleanup::LastOut;
 use iceoryx2::prelude::*;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -75,6 +78,10 @@ pub enum TransportError {
     ParentGone { parent: u32, now: libc::pid_t },
     #[error("{what} failed: {cause}")]
     Io { what: String, cause: std::io::Error },
+    /// This user's iceoryx2 root ([`iceoryx_root`]) exists but cannot be trusted with the
+    /// run's files.
+    #[error("iceoryx2 root `{}` {problem}", path.display())]
+    UnsafeRoot { path: PathBuf, problem: String },
 }
 
 /// How a process wants SIGTERM and SIGINT handled while it uses the transport.
@@ -125,21 +132,33 @@ impl RunConfig {
 }
 
 /// The iceoryx2 configuration of a run: defaults (no config file is read, so a user's or the
-/// system's `iceoryx2.toml` cannot change a run) with the run's own file prefix.
+/// system's `iceoryx2.toml` cannot change a run) with this user's root and the run's own file
+/// prefix.
 pub fn iceoryx_config(run_id: &str) -> Result<Config, TransportError> {
     services::validate_run_id(run_id).map_err(TransportError::InvalidRunId)?;
-    let mut config = default_config();
+    let mut config = default_config()?;
     config.global.prefix = FileName::new(run_prefix(run_id).as_bytes())
         .map_err(|e| TransportError::InvalidRunId(format!("run id `{run_id}`: {e:?}")))?;
     Ok(config)
 }
 
-/// iceoryx2's default configuration, with its log level at errors. Our configuration does
-/// not come from a file, but iceoryx2 looks one up (on the first use of its global
+/// iceoryx2's default configuration, with its log level at errors and its root moved to this
+/// user's own directory (created and checked here; see [`iceoryx_root`]). Our configuration
+/// does not come from a file, but iceoryx2 looks one up (on the first use of its global
 /// configuration, and when it cleans a dead node without details) and warns on stderr.
-fn default_config() -> Config {
+fn default_config() -> Result<Config, TransportError> {
     set_log_level(LogLevel::Error);
-    Config::default()
+    let root = root::ensure_root()?;
+    // A trailing `/`, as in iceoryx2's own default root.
+    let root_path = Path::new(format!("{}/", root.display()).as_bytes()).map_err(|e| {
+        TransportError::UnsafeRoot {
+            path: root,
+            problem: format!("is not a valid iceoryx2 path: {e:?}"),
+        }
+    })?;
+    let mut config = Config::default();
+    config.global.set_root_path(&root_path);
+    Ok(config)
 }
 
 fn run_prefix(run_id: &str) -> String {

@@ -3,13 +3,15 @@
 //! Each test owns a run id (hence its own files in /dev/shm), so the tests run in parallel
 //! without meeting. Every wait is bounded and says what it waited for when it fails.
 
+use flockstep_proto::services::MAX_RUN_ID;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    cleanup_run, leftover_files, sweep_stale_runs, FromWorld, RunConfig, RunServices, SignalMode,
-    SupervisorPorts, TransportError,
+    cleanup_run, iceoryx_root, leftover_files, sweep_stale_runs, FromWorld, RunConfig, RunServices,
+    SignalMode, SupervisorPorts, TransportError,
 };
 use flockstep_proto::{Action, EpisodeReport, Membership, Observation};
 use std::io::BufRead;
+use std::os::unix::fs::MetadataExt;
 use std::time::Duration;
 
 const BOUND: Duration = Duration::from_secs(5);
@@ -111,12 +113,60 @@ fn a_second_world_for_the_same_run_is_refused() {
 
 #[test]
 fn bad_run_ids_are_errors_not_panics() {
-    for bad in ["", "a/b", "a.b", &"x".repeat(41)] {
+    for bad in ["", "a/b", "a.b", &"x".repeat(MAX_RUN_ID + 1)] {
         let error = RunServices::create(&RunConfig::new(bad, SignalMode::Untouched)).err();
         assert!(
             matches!(error, Some(TransportError::InvalidRunId(_))),
             "run id {bad:?}: {error:?}"
         );
+    }
+}
+
+/// iceoryx2's shared default root (`/tmp/iceoryx2`) belongs to whichever user made it first;
+/// a run keeps its node, service and socket files in this user's own private root instead.
+#[test]
+fn a_run_keeps_its_files_in_this_users_private_root() {
+    let config = run("root");
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let root = iceoryx_root();
+    // SAFETY: geteuid takes no arguments and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    assert_eq!(root, std::path::PathBuf::from(format!("/tmp/flockstep-{uid}")));
+    let meta = std::fs::symlink_metadata(&root).unwrap();
+    assert!(meta.is_dir(), "{}", root.display());
+    assert_eq!(meta.uid(), uid, "{}", root.display());
+    assert_eq!(
+        meta.mode() & 0o022,
+        0,
+        "{} is writable by group or others: {:o}",
+        root.display(),
+        meta.mode()
+    );
+    let files = leftover_files(&config.run_id).unwrap();
+    let in_root = files.iter().filter(|f| f.starts_with(&root)).count();
+    assert!(in_root > 0, "no file of the live run under {}: {files:#?}", root.display());
+    assert!(files.iter().all(|f| !f.starts_with("/tmp/iceoryx2")), "{files:#?}");
+}
+
+/// The longest run id still gives socket paths that fit the 108 bytes of a Unix socket path,
+/// for this user and for the longest root there can be (`/tmp/flockstep-4294967295/`).
+#[test]
+fn the_longest_run_id_fits_every_users_socket_paths() {
+    let mut config = run("long");
+    config.run_id = format!("{:x<MAX_RUN_ID$}", config.run_id);
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let _agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let _supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
+    world.wait_for_peers(1, true, BOUND).unwrap();
+    let longest_root = "/tmp/flockstep-4294967295/".len();
+    let root = format!("{}/", iceoryx_root().display()).len();
+    let files = leftover_files(&config.run_id).unwrap();
+    let sockets: Vec<_> =
+        files.iter().filter(|f| f.extension() == Some("event".as_ref())).collect();
+    assert!(!sockets.is_empty(), "no event socket: {files:#?}");
+    for socket in sockets {
+        let len = socket.as_os_str().len() - root + longest_root;
+        assert!(len <= 108, "{} would have {len} bytes", socket.display());
     }
 }
 
@@ -571,7 +621,10 @@ fn a_full_episode_buffer_fails_after_the_report_timeout_instead_of_dropping() {
 #[test]
 fn an_error_says_its_cause_once() {
     let cause = std::io::Error::from_raw_os_error(libc::EACCES);
-    let error = TransportError::Io { what: "listing /tmp/iceoryx2".into(), cause };
+    let error = TransportError::Io { what: "listing /tmp/flockstep-0".into(), cause };
     assert!(std::error::Error::source(&error).is_none());
-    assert_eq!(error.to_string(), "listing /tmp/iceoryx2 failed: Permission denied (os error 13)");
+    assert_eq!(
+        error.to_string(),
+        "listing /tmp/flockstep-0 failed: Permission denied (os error 13)"
+    );
 }

@@ -2,10 +2,12 @@
 //! keeps per prefix, which nothing in iceoryx2 removes. Also lists what a run left behind, so
 //! tests and the supervisor can check that a shutdown was clean.
 
+use super::root::effective_uid;
 use super::{run_prefix, setup, Ipc, TransportError, PREFIX_HEAD};
 use crate::services;
 use iceoryx2::prelude::*;
 use std::collections::BTreeSet;
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path as StdPath, PathBuf};
 use std::time::Duration;
 
@@ -26,7 +28,7 @@ pub struct RunCleanup {
 
 /// Removes what a run left behind: the resources of its dead nodes and, once no node of the
 /// run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that iceoryx2 keeps
-/// in `/dev/shm` for the life of the machine.
+/// in `/dev/shm` for the life of the machine (only this user's: see [`names_owned_by`]).
 pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     let config = super::iceoryx_config(run_id)?;
     let mut report = RunCleanup::default();
@@ -50,7 +52,7 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
         let suffix = std::str::from_utf8(config.global.node.global_mgmt_suffix.as_bytes())
             .unwrap_or(".global_mgmt");
         let prefix = run_prefix(run_id);
-        for name in dir_names(StdPath::new(SHM_DIR))? {
+        for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
             if name.starts_with(&prefix) && name.ends_with(suffix) {
                 shm_unlink(&name)?;
                 report.files += 1;
@@ -86,17 +88,18 @@ pub struct SweepReport {
     pub failed: Vec<(String, String)>,
 }
 
-/// Start-up clean-up across runs: every flockstep run found in `/dev/shm` or under the
-/// iceoryx2 root gets [`cleanup_run`]. Live runs keep everything but their dead nodes.
+/// Start-up clean-up across runs: every flockstep run found in `/dev/shm` or under this
+/// user's iceoryx2 root gets [`cleanup_run`]. Live runs keep everything but their dead nodes.
 ///
 /// A run that cannot be cleaned is listed in [`SweepReport::failed`] and skipped: one old
 /// run's files that this user may not remove must not stop every later run, whose files
 /// carry their own prefix (a run id still in use is refused when the run creates its
-/// services). Only an error listing the directories fails the sweep.
+/// services). Only an error listing the directories, or a root that cannot be trusted,
+/// fails the sweep.
 pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
     let mut runs = BTreeSet::new();
-    for dir in candidate_dirs() {
-        for name in dir_names(&dir)? {
+    for dir in candidate_dirs()? {
+        for name in names_owned_by(&dir, effective_uid())? {
             if let Some(run_id) =
                 name.strip_prefix(PREFIX_HEAD).and_then(|rest| rest.split('.').next())
             {
@@ -123,13 +126,13 @@ pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
     Ok(report)
 }
 
-/// Every file of a run still present in `/dev/shm` or under the iceoryx2 root. Empty once the
-/// last process of a run has exited cleanly.
+/// Every file of a run still present in `/dev/shm` or under this user's iceoryx2 root. Empty
+/// once the last process of a run has exited cleanly.
 pub fn leftover_files(run_id: &str) -> Result<Vec<PathBuf>, TransportError> {
     services::validate_run_id(run_id).map_err(TransportError::InvalidRunId)?;
     let prefix = run_prefix(run_id);
     let mut found = Vec::new();
-    let mut dirs = candidate_dirs();
+    let mut dirs = candidate_dirs()?;
     while let Some(dir) = dirs.pop() {
         let entries = match std::fs::read_dir(&dir) {
             Ok(entries) => entries,
@@ -155,25 +158,31 @@ pub fn leftover_files(run_id: &str) -> Result<Vec<PathBuf>, TransportError> {
     Ok(found)
 }
 
-/// `/dev/shm` and the iceoryx2 root with its node and service directories.
-fn candidate_dirs() -> Vec<PathBuf> {
-    let global = super::default_config().global;
+/// `/dev/shm` and this user's iceoryx2 root with its node and service directories, taken
+/// from the configuration every run's node uses, so they are the directories its files are in.
+fn candidate_dirs() -> Result<Vec<PathBuf>, TransportError> {
+    let global = super::default_config()?.global;
     let path = |p: &iceoryx2::prelude::Path| {
         PathBuf::from(String::from_utf8_lossy(p.as_bytes()).into_owned())
     };
-    vec![
+    Ok(vec![
         PathBuf::from(SHM_DIR),
         path(global.root_path()),
         path(&global.node_dir()),
         path(&global.service_dir()),
-    ]
+    ])
 }
 
-fn dir_names(dir: &StdPath) -> Result<Vec<String>, TransportError> {
+/// Names of the entries of `dir` that belong to `uid` (this user, but for tests). `/dev/shm`
+/// is shared by every user, but a run's nodes are listed only under its own user's root: from
+/// here another user's live run looks dead, and as root the clean-up could remove its files.
+fn names_owned_by(dir: &StdPath, uid: u32) -> Result<Vec<String>, TransportError> {
     match std::fs::read_dir(dir) {
-        Ok(entries) => {
-            Ok(entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
-        }
+        Ok(entries) => Ok(entries
+            .flatten()
+            .filter(|e| e.metadata().is_ok_and(|m| m.uid() == uid))
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
         Err(cause) => Err(TransportError::Io { what: format!("listing {}", dir.display()), cause }),
     }
@@ -197,5 +206,20 @@ impl Drop for LastOut {
     fn drop(&mut self) {
         // Nothing useful can be done with an error while dropping; the sweep retries.
         let _ = cleanup_run(&self.run_id);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_given_users_files_are_taken_for_clean_up() {
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join("flockstep.r.x.global_mgmt"), b"").unwrap();
+        let mine = names_owned_by(tmp.path(), effective_uid()).unwrap();
+        assert_eq!(mine, ["flockstep.r.x.global_mgmt"]);
+        let others = names_owned_by(tmp.path(), effective_uid().wrapping_add(1)).unwrap();
+        assert!(others.is_empty(), "{others:?}");
     }
 }
