@@ -297,7 +297,11 @@ fn serve(
         // answer for a sign they are lost.
         Ok(stop_answer) => {
             session.save_all()?;
-            return Ok(stop_answer.send()?);
+            stop_answer.send()?;
+            if !ports.await_world_gone(world_timeout)? {
+                tracing::warn!("the world did not leave after the stop round; leaving anyway");
+            }
+            return Ok(());
         }
         Err(error) => error,
     };

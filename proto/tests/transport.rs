@@ -71,6 +71,20 @@ fn world_agent_and_supervisor_exchange_every_message() {
     assert_eq!(sender.pid(), Some(std::process::id()), "the sender's process is known");
 }
 
+/// An agent that answered the stop round leaves once the world has (its last answer would
+/// otherwise be lost now and then): the wait ends when the world's ports are gone, and
+/// after its timeout while they are not.
+#[test]
+fn an_agent_waits_for_the_world_to_leave() {
+    let config = run("world-gone");
+    let world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let stayed = agent.await_world_gone(Duration::from_millis(50)).unwrap();
+    assert!(!stayed, "the world is still there");
+    drop(world);
+    assert!(agent.await_world_gone(BOUND).unwrap(), "the world has left");
+}
+
 #[test]
 fn open_waits_until_the_world_has_created_the_services() {
     let config = run("openwait");

@@ -505,6 +505,22 @@ impl AgentPorts {
     pub fn waiter(&self) -> &Waiter {
         &self.waiter
     }
+
+    /// Waits until the world has left the run (its observation publisher is gone), at most
+    /// `timeout`, or until this process is asked to terminate; true if the world left. An
+    /// agent's answer to the stop round is its last sample, and a process that ended right
+    /// after sending it lost it now and then (a Ctrl-C at start-up failed about one run in
+    /// seven with the world waiting for a stop answer from an agent already gone): an agent
+    /// leaves after the world, which reads every answer before it ends.
+    pub fn await_world_gone(&self, timeout: Duration) -> Result<bool, TransportError> {
+        let observations = &self.services.observations;
+        let gone = || Ok((observations.dynamic_config().number_of_publishers() == 0).then_some(()));
+        match self.waiter.wait(&"the world to leave", timeout, gone) {
+            Ok(()) => Ok(true),
+            Err(TransportError::Timeout { .. } | TransportError::Terminated { .. }) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
 }
 
 /// An agent's answer being written in shared memory (see [`AgentPorts::loan_action`]).
