@@ -54,7 +54,7 @@ fn vm_hwm_kib(status: &str) -> Option<u64> {
 pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> {
     if config.transport == Transport::Shm {
         // Before anything is written or started: this run would read the other's records.
-        crate::shm::refuse_run_id_in_use(&config.run_id)?;
+        crate::shm::prepare(&config.run_id)?;
     }
     prepare_out_dir(config)?;
     let e = &config.episodes;

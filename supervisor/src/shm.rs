@@ -39,13 +39,6 @@ const GRACE: Duration = Duration::from_secs(10);
 const MAX_RESTARTS: u32 = 5;
 
 pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Result<Outcome> {
-    let swept = sweep_stale_runs().context("cleaning stale resources of earlier runs")?;
-    if !swept.runs_cleaned.is_empty() {
-        tracing::info!(runs = ?swept.runs_cleaned, "removed stale resources of dead runs");
-    }
-    for (run, why) in &swept.failed {
-        tracing::warn!("left the files of run `{run}` in place, they cannot be removed: {why}");
-    }
     let logs = config.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
     if let Some(dir) = &config.trace_dir {
@@ -84,10 +77,21 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
     Ok(outcome)
 }
 
-/// Refuses a run id that a live run uses (`--run-id` given twice): this run's world would
-/// fail to create its services, after its supervisor had opened the other run's. The dead
-/// nodes of a crashed run of that id are removed on the way.
-pub fn refuse_run_id_in_use(run_id: &str) -> Result<()> {
+/// Before anything is written or started: removes the stale resources of dead runs (a
+/// crashed run of this id included), then refuses a run id that a live run uses (`--run-id`
+/// given twice): this run's world would fail to create its services, after its supervisor
+/// had opened the other run's.
+pub fn prepare(run_id: &str) -> Result<()> {
+    let swept = sweep_stale_runs().context("cleaning stale resources of earlier runs")?;
+    if !swept.runs_cleaned.is_empty() {
+        tracing::info!(runs = ?swept.runs_cleaned, "removed stale resources of dead runs");
+    }
+    for (run, why) in &swept.failed {
+        if run == run_id {
+            bail!("--run-id {run_id}: an earlier run of this id left files that cannot be removed: {why}");
+        }
+        tracing::warn!("left the files of run `{run}` in place, they cannot be removed: {why}");
+    }
     if RunServices::is_served(run_id)? {
         bail!("--run-id {run_id}: a live run uses this id; choose another");
     }

@@ -252,11 +252,11 @@ impl RunServices {
         &self.run.run_id
     }
 
-    /// Whether a live world serves `run_id`: the run's services exist once the resources of
-    /// its dead nodes are gone (a crashed world's go with them). Other processes that wait
-    /// for the run (an agent attaching before it starts) create none.
+    /// Whether a live world serves `run_id`: its services exist. Call it once the resources of
+    /// the run's dead nodes are removed ([`super::cleanup_run`], [`super::sweep_stale_runs`]),
+    /// which removes a crashed world's services too. Other processes that wait for the run
+    /// (an agent attaching before it starts) create none.
     pub fn is_served(run_id: &str) -> Result<bool, TransportError> {
-        super::cleanup_run(run_id)?;
         let config = super::iceoryx_config(run_id)?;
         let name = service_name(run_id, OBSERVATIONS)?;
         <Ipc as iceoryx2::service::Service>::does_exist(
