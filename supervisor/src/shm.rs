@@ -88,7 +88,10 @@ pub fn prepare(run_id: &str) -> Result<()> {
     }
     for (run, why) in &swept.failed {
         if run == run_id {
-            bail!("--run-id {run_id}: an earlier run of this id left files that cannot be removed: {why}");
+            bail!(
+                "--run-id {run_id}: an earlier run of this id left files that cannot be \
+                 removed: {why}"
+            );
         }
         tracing::warn!("left the files of run `{run}` in place, they cannot be removed: {why}");
     }
@@ -282,7 +285,10 @@ impl Fleet<'_> {
             }
             if stop.hurry_asked() {
                 if !self.world.brought_down() {
-                    recorder.say("stopping at once: every process is told to leave now (an agent saves its Q-tables as it leaves)");
+                    recorder.say(
+                        "stopping at once: every process is told to leave now (an agent saves \
+                         its Q-tables as it leaves)",
+                    );
                 }
                 self.hurry()?;
             }
