@@ -117,7 +117,8 @@ pub fn eval(
         ..defaults.clone()
     };
     let mut config = crate::config::RunConfig::resolve_resuming_as(&args, "eval --qtables")?;
-    if let Some(note) = attached_left_out(&summary, uavs) {
+    let notes = [incomplete_run(&summary, &path), attached_left_out(&summary, uavs)];
+    for note in notes.into_iter().flatten() {
         output::message(&format!("supervisor: {note}"));
         config.notes.push(note);
     }
@@ -145,6 +146,19 @@ pub fn eval(
         ));
     }
     Ok(outcome.complete)
+}
+
+/// What `eval` says of a run whose `summary.json` (at `path`) has `"complete": false`: it
+/// was stopped early or failed, so the tables evaluated are what it had learned by then, not
+/// what it set out to learn. None for a complete run (or an older summary without the field).
+fn incomplete_run(summary: &serde_json::Value, path: &Path) -> Option<String> {
+    (summary["complete"].as_bool() == Some(false)).then(|| {
+        format!(
+            "eval evaluates the Q-tables of a run that did not complete ({} says \"complete\": \
+             false): what it had learned when it stopped",
+            path.display()
+        )
+    })
 }
 
 /// What `eval` leaves out of a run whose `summary.json` lists agents that attached (`agents`,
@@ -205,5 +219,20 @@ mod tests {
         let none_attached = serde_json::json!({ "agents": [{ "uav": 1, "attached": false }] });
         assert_eq!(attached_left_out(&none_attached, 1), None);
         assert_eq!(attached_left_out(&serde_json::json!({}), 1), None, "an older summary");
+    }
+
+    #[test]
+    fn an_evaluation_says_when_the_run_did_not_complete() {
+        let path = Path::new("run/summary.json");
+        let stopped = serde_json::json!({ "complete": false });
+        assert_eq!(
+            incomplete_run(&stopped, path).as_deref(),
+            Some(
+                "eval evaluates the Q-tables of a run that did not complete (run/summary.json \
+                 says \"complete\": false): what it had learned when it stopped"
+            )
+        );
+        assert_eq!(incomplete_run(&serde_json::json!({ "complete": true }), path), None);
+        assert_eq!(incomplete_run(&serde_json::json!({}), path), None, "an older summary");
     }
 }

@@ -120,7 +120,8 @@ impl RunConfig {
         flockstep_proto::services::validate_run_id(&run_id)
             .map_err(|e| anyhow::anyhow!("--run-id: {e}"))?;
         let out = args.out.clone().unwrap_or_else(|| PathBuf::from("results").join(&run_id));
-        check_out_dir(&out, args.overwrite, args.resume.as_deref())?;
+        let resume = args.resume.as_deref().map(|dir| (dir, resume_flag));
+        check_out_dir(&out, args.overwrite, resume)?;
         let config = RunConfig {
             scenario_arg,
             scenario: Arc::new(scenario),
@@ -358,8 +359,29 @@ fn check_snapshots(config: &RunConfig, dir: &Path, flag: &str) -> Result<()> {
 }
 
 /// Refuses an `out` that holds an earlier run's results unless `overwrite`, and an
-/// `overwrite` that would remove the snapshots `resume` starts from.
-fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<()> {
+/// `overwrite` that would remove the snapshots `resume` starts from (the directory, named by
+/// its flag): `out` itself, whose `qtables/` it removes, or a directory inside an entry it
+/// removes (`out/eval/`, which `eval` writes with a copy of the tables). Both before anything
+/// is removed or written; the second also when `out` holds no earlier run, as `--overwrite`
+/// removes those entries all the same.
+fn check_out_dir(out: &Path, overwrite: bool, resume: Option<(&Path, &str)>) -> Result<()> {
+    if let Some((resume, flag)) = resume.filter(|_| overwrite) {
+        if same_dir(resume, out) {
+            bail!(
+                "--overwrite: {flag} {} is the results directory it would replace; give another --out",
+                resume.display()
+            );
+        }
+        if let Some(entry) = crate::results::removed_entry_holding(out, resume) {
+            bail!(
+                "{flag} {} would be removed by --overwrite, which removes {} from the results \
+                 directory {}; give another --out, or copy the snapshots elsewhere first",
+                resume.display(),
+                entry.display(),
+                out.display()
+            );
+        }
+    }
     let Some(found) = crate::results::earlier_results(out) else { return Ok(()) };
     // Not `--out DIR`: `reproduce` and `eval` choose the directory when no --out is given.
     if !overwrite {
@@ -367,12 +389,6 @@ fn check_out_dir(out: &Path, overwrite: bool, resume: Option<&Path>) -> Result<(
             "results directory {}: holds the results of an earlier run ({found}); choose \
              another directory (--out), or --overwrite to replace them",
             out.display()
-        );
-    }
-    if let Some(resume) = resume.filter(|r| same_dir(r, out)) {
-        bail!(
-            "--overwrite: --resume {} is the results directory it would replace; give another --out",
-            resume.display()
         );
     }
     Ok(())
@@ -493,6 +509,44 @@ mod tests {
         check_episode_counts(&one_trial).expect("as many as a u64 counts");
         let e = refused(&["--eval-every", "1000", "--episodes", "2001", "--eval-block", &most]);
         assert!(e.contains("more greedy episodes per trial than a run can count"), "{e}");
+    }
+
+    /// `--overwrite` removes `eval/` whole, with the copy of the tables `eval` wrote there: a
+    /// `--resume` there is refused before anything is removed (it used to be removed, the
+    /// earlier run with it, and the run failed for want of snapshots), also when the
+    /// directory holds no earlier run and however the path is spelt. A directory beside the
+    /// removed entries is kept, and may be resumed from.
+    #[test]
+    fn overwrite_refuses_a_resume_directory_inside_what_it_removes() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        for kept in ["eval/qtables", "evaluated/qtables"] {
+            std::fs::create_dir_all(out.join(kept)).unwrap();
+        }
+        let resume = out.join("eval");
+        let refused = |resume: &Path| {
+            check_out_dir(out, true, Some((resume, "--resume"))).unwrap_err().to_string()
+        };
+        let expected = format!(
+            "--resume {} would be removed by --overwrite, which removes {} from the results \
+             directory {}; give another --out, or copy the snapshots elsewhere first",
+            resume.display(),
+            out.join("eval").display(),
+            out.display()
+        );
+        assert_eq!(refused(&resume), expected, "no earlier run in {}", out.display());
+        std::fs::write(out.join("summary.json"), "{}").unwrap();
+        assert_eq!(refused(&resume), expected);
+        let spelt = out.join("evaluated").join("..").join("eval").join("qtables");
+        assert!(refused(&spelt).contains("which removes"), "{}", spelt.display());
+        check_out_dir(out, true, Some((&out.join("evaluated"), "--resume"))).expect("kept");
+        let e = refused(out);
+        assert!(
+            e.ends_with("is the results directory it would replace; give another --out"),
+            "{e}"
+        );
+        let e = check_out_dir(out, false, Some((&resume, "--resume"))).unwrap_err().to_string();
+        assert!(e.contains("holds the results of an earlier run"), "{e}");
     }
 
     /// `reproduce` and `eval` choose a results directory when no `--out` is given: the

@@ -104,21 +104,7 @@ impl Recorder {
             Phase::Train => "training",
             Phase::Eval => "greedy",
         });
-        // UAV1's lengths: the recent training ones, or in the final evaluation its greedy
-        // ones so far (a periodic block shows the training ones).
-        let lengths = match (self.phase, self.collector.greedy(0)) {
-            (Phase::Eval, Some(greedy)) => {
-                format!("greedy mean length {:.1}, {} truncated", greedy.mean(), greedy.truncated)
-            }
-            _ => {
-                let recent = self.collector.train_lengths().first().map(|trials| {
-                    let tail: Vec<u32> =
-                        trials.iter().flat_map(|t| t.last(RECENT / trials.len().max(1))).collect();
-                    tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len().max(1) as f64
-                });
-                format!("mean length {:.1}", recent.unwrap_or(0.0))
-            }
-        };
+        let lengths = uav1_lengths(self.phase, &self.collector);
         let ticks_per_s =
             self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
         self.bar
@@ -143,6 +129,24 @@ impl Recorder {
     }
 }
 
+/// What the progress says of UAV1's lengths: the mean of its recent training ones, or in the
+/// final evaluation its greedy mean so far and how many hit the tick cap (a periodic block
+/// shows the training ones). `-` until it has finished an episode: a mean of none is no
+/// number (it showed `-0.0`, the sum of no lengths).
+fn uav1_lengths(phase: Phase, collector: &Collector) -> String {
+    if let (Phase::Eval, Some(greedy)) = (phase, collector.greedy(0)) {
+        return format!("greedy mean length {:.1}, {} truncated", greedy.mean(), greedy.truncated);
+    }
+    let trials = collector.train_lengths().first().map_or(&[][..], Vec::as_slice);
+    // Divided among the trials there are (the closure runs for one, if any).
+    let recent: Vec<u32> = trials.iter().flat_map(|t| t.last(RECENT / trials.len())).collect();
+    if recent.is_empty() {
+        return "mean length -".to_string();
+    }
+    let mean = recent.iter().map(|&l| f64::from(l)).sum::<f64>() / recent.len() as f64;
+    format!("mean length {mean:.1}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,6 +158,19 @@ mod tests {
         report.lengths[0] = length;
         report.truncated = u64::from(truncated);
         report
+    }
+
+    /// Before UAV1 has finished an episode its mean length is `-`, in training and in an
+    /// evaluation alike.
+    #[test]
+    fn no_mean_length_is_shown_before_uav1_finished_an_episode() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        for phase in [Phase::Train, Phase::Eval] {
+            assert_eq!(uav1_lengths(phase, &collector), "mean length -", "{phase:?}");
+        }
+        collector.record(&report(Phase::Train, 0, 20, false)).unwrap();
+        assert_eq!(uav1_lengths(Phase::Train, &collector), "mean length 20.0");
     }
 
     #[test]

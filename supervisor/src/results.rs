@@ -35,10 +35,24 @@ pub fn earlier_results(dir: &Path) -> Option<&'static str> {
     ["summary.json", "episodes.csv"].into_iter().find(|file| dir.join(file).exists())
 }
 
+/// What `--overwrite` removes from `dir`: its [`RUN_OUTPUTS`], each whole (a directory with
+/// whatever else was put in it).
+fn removed_by_overwrite(dir: &Path) -> impl Iterator<Item = PathBuf> + '_ {
+    RUN_OUTPUTS.into_iter().map(|name| dir.join(name))
+}
+
+/// The entry of `dir` that [`remove_earlier_results`] removes and that is or holds `path`,
+/// if any, compared as canonical paths (links followed; a path that does not exist is in
+/// none): a `--resume` directory there would be gone before the run reads its snapshots.
+pub fn removed_entry_holding(dir: &Path, path: &Path) -> Option<PathBuf> {
+    let path = path.canonicalize().ok()?;
+    removed_by_overwrite(dir)
+        .find(|entry| entry.canonicalize().is_ok_and(|entry| path.starts_with(entry)))
+}
+
 /// Removes what an earlier run wrote into `dir` ([`RUN_OUTPUTS`]).
 pub fn remove_earlier_results(dir: &Path) -> Result<()> {
-    for name in RUN_OUTPUTS {
-        let path = dir.join(name);
+    for path in removed_by_overwrite(dir) {
         let removed = match std::fs::symlink_metadata(&path) {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
             Err(e) => Err(e),
@@ -50,19 +64,58 @@ pub fn remove_earlier_results(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Greedy-evaluation totals of one agent over every trial.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// Greedy-evaluation results of one agent after training.
+#[derive(Debug, Clone, PartialEq)]
 pub struct GreedyStats {
+    /// Greedy episodes over every trial.
     pub episodes: u64,
-    pub total_length: u64,
     pub truncated: u64,
-    /// Mean length per trial.
-    pub per_trial: Vec<f64>,
+    /// Mean length per trial, by trial: None for a trial the agent has no greedy episode of
+    /// (one the run was stopped in before its evaluation).
+    pub per_trial: Vec<Option<f64>>,
+    /// The mean over trials ([`OverTrials`]).
+    mean: f64,
 }
 
-/// Periodic greedy evaluations a trial may have (`--eval-every`): the collector keeps a total
-/// per agent and evaluation from the start (24 bytes each, 2.4 MB per agent at this cap), and
-/// each is a row of `greedy_curve.csv` and a point of the plot.
+/// Greedy totals of one agent in one trial, or in one trial's periodic block: (episodes,
+/// total length, truncated).
+type Totals = (u64, u64, u64);
+
+/// The mean length of one trial's greedy `totals`; None without episodes.
+fn trial_mean((episodes, total, _): Totals) -> Option<f64> {
+    (episodes > 0).then(|| total as f64 / episodes as f64)
+}
+
+/// A greedy mean over trials: the mean of each trial's mean length, as `curve.csv`'s "mean
+/// over trials", so that every trial weighs the same whatever its count of episodes (an
+/// agent restarted during an evaluation misses some); a trial without episodes is left out.
+/// The one definition of the greedy lengths of `summary.json` and `greedy_curve.csv`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct OverTrials {
+    sum_of_means: f64,
+    trials: u32,
+    truncated: u64,
+}
+
+impl OverTrials {
+    /// Adds one trial's totals.
+    fn add(&mut self, totals: Totals) {
+        if let Some(mean) = trial_mean(totals) {
+            self.sum_of_means += mean;
+            self.trials += 1;
+        }
+        self.truncated += totals.2;
+    }
+
+    /// None until a trial has episodes.
+    fn mean(&self) -> Option<f64> {
+        (self.trials > 0).then(|| self.sum_of_means / f64::from(self.trials))
+    }
+}
+
+/// Periodic greedy evaluations a trial may have (`--eval-every`): the collector keeps a mean
+/// over trials per agent and evaluation from the start (24 bytes each, 2.4 MB per agent at
+/// this cap), and each is a row of `greedy_curve.csv` and a point of the plot.
 pub const MAX_EVAL_BLOCKS: u64 = 100_000;
 
 /// Where greedy-evaluation episodes belong: periodic blocks during training, then the final
@@ -110,9 +163,6 @@ fn write_csv_line(csv: &mut impl Write, fields: [u64; 6]) -> std::io::Result<()>
     }
     csv.write_all(b"\n")
 }
-
-/// Greedy totals of one periodic block: (episodes, total length, truncated).
-type Totals = (u64, u64, u64);
 
 /// A CSV file the run streams into, with its path for the errors.
 #[derive(Debug)]
@@ -211,11 +261,15 @@ pub struct Collector {
     /// Training lengths: `train[agent][trial]`.
     train: Vec<Vec<Flown>>,
     train_truncated: Vec<u64>,
-    /// Final greedy sums: `(episodes, total length, truncated)` per agent and trial.
+    /// Final greedy totals per agent and trial.
     greedy: Vec<Vec<Totals>>,
     plan: EvalPlan,
-    /// Periodic greedy sums per agent and block, over all trials.
-    periodic: Vec<Vec<Totals>>,
+    /// Periodic greedy evaluations per agent and block, over the trials whose block is
+    /// closed. A trial's blocks come in order, so only its latest is open, in `open_block`.
+    periodic: Vec<Vec<OverTrials>>,
+    /// Per agent and trial: the latest periodic block it was evaluated in, and its totals
+    /// there; added to `periodic` when the trial's next block begins (read with it before).
+    open_block: Vec<Vec<(usize, Totals)>>,
     /// Ticks of every trial, counting training and evaluation.
     ticks: Vec<u64>,
     /// The episode whose report comes next, per trial and phase (training, evaluation): the
@@ -234,6 +288,7 @@ impl Collector {
             greedy: Vec::new(),
             plan,
             periodic: Vec::new(),
+            open_block: Vec::new(),
             ticks: vec![0; trials],
             next_episode: vec![[0; 2]; trials],
         };
@@ -299,7 +354,14 @@ impl Collector {
                 }
                 Phase::Eval => {
                     let entry = match self.plan.block_of(report.episode) {
-                        Some(block) => &mut self.periodic[slot][block],
+                        Some(block) => {
+                            let (open, totals) = &mut self.open_block[slot][trial];
+                            if *open != block {
+                                self.periodic[slot][*open].add(*totals);
+                                (*open, *totals) = (block, (0, 0, 0));
+                            }
+                            totals
+                        }
                         None => &mut self.greedy[slot][trial],
                     };
                     entry.0 += 1;
@@ -317,7 +379,8 @@ impl Collector {
         self.train.resize(agents, vec![Flown::default(); trials]);
         self.train_truncated.resize(agents, 0);
         self.greedy.resize(agents, vec![(0, 0, 0); trials]);
-        self.periodic.resize(agents, vec![(0, 0, 0); self.plan.blocks as usize]);
+        self.periodic.resize(agents, vec![OverTrials::default(); self.plan.blocks as usize]);
+        self.open_block.resize(agents, vec![(0, (0, 0, 0)); trials]);
     }
 
     pub fn flush(&mut self) -> Result<()> {
@@ -348,33 +411,41 @@ impl Collector {
     }
 
     /// The periodic greedy evaluations of `agent`: (training episodes behind the policy,
-    /// mean greedy length over trials and episodes, truncated episodes), for blocks run.
+    /// greedy mean length over trials ([`OverTrials`]), truncated episodes in all trials),
+    /// for blocks run.
     pub fn greedy_curve(&self, agent: usize) -> Vec<(u64, f64, u64)> {
-        self.periodic.get(agent).map_or_else(Vec::new, |blocks| {
-            blocks
-                .iter()
-                .enumerate()
-                .filter(|(_, t)| t.0 > 0)
-                .map(|(b, &(n, total, truncated))| {
-                    ((b as u64 + 1) * self.plan.every, total as f64 / n as f64, truncated)
-                })
-                .collect()
-        })
-    }
-
-    /// Greedy totals of `agent` after training (None if it was never evaluated).
-    pub fn greedy(&self, agent: usize) -> Option<GreedyStats> {
-        let trials = self.greedy.get(agent)?;
-        let mut stats = GreedyStats::default();
-        for &(episodes, total, truncated) in trials {
-            stats.episodes += episodes;
-            stats.total_length += total;
-            stats.truncated += truncated;
-            if episodes > 0 {
-                stats.per_trial.push(total as f64 / episodes as f64);
+        let (Some(blocks), Some(open)) = (self.periodic.get(agent), self.open_block.get(agent))
+        else {
+            return Vec::new();
+        };
+        let mut blocks = blocks.clone();
+        for &(block, totals) in open {
+            // A run without periodic blocks has none to add to.
+            if let Some(over) = blocks.get_mut(block) {
+                over.add(totals);
             }
         }
-        (stats.episodes > 0).then_some(stats)
+        let after = |block: usize| (block as u64 + 1) * self.plan.every;
+        blocks
+            .iter()
+            .enumerate()
+            .filter_map(|(b, over)| Some((after(b), over.mean()?, over.truncated)))
+            .collect()
+    }
+
+    /// Greedy results of `agent` after training (None if it was never evaluated).
+    pub fn greedy(&self, agent: usize) -> Option<GreedyStats> {
+        let trials = self.greedy.get(agent)?;
+        let mut over = OverTrials::default();
+        for &totals in trials {
+            over.add(totals);
+        }
+        Some(GreedyStats {
+            episodes: trials.iter().map(|t| t.0).sum(),
+            truncated: over.truncated,
+            per_trial: trials.iter().copied().map(trial_mean).collect(),
+            mean: over.mean()?,
+        })
     }
 
     /// Barrier rounds: every round advances each trial that is not done by one tick, and
@@ -394,9 +465,9 @@ impl Collector {
 }
 
 impl GreedyStats {
-    /// Mean over trials of each trial's mean greedy length.
+    /// Mean over trials of each trial's mean greedy length ([`OverTrials`]).
     pub fn mean(&self) -> f64 {
-        self.per_trial.iter().sum::<f64>() / self.per_trial.len().max(1) as f64
+        self.mean
     }
 }
 
@@ -466,6 +537,77 @@ mod tests {
         assert_eq!(collector.final_mean(0, 1000), Some(((25.0 + 5.0) / 2.0, 2)));
         assert_eq!(collector.final_mean(0, 1), Some(((30.0 + 6.0) / 2.0, 1)));
         assert_eq!(collector.final_mean(1, 1000), None, "no such agent");
+    }
+
+    /// A trial the run was stopped in before its final evaluation has no greedy episodes:
+    /// its place in `greedy_episode_length_per_trial` is null, and the later trials' lengths
+    /// stay at their own places (they used to move up into the empty ones).
+    #[test]
+    fn greedy_lengths_per_trial_keep_each_trials_place() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 4, EvalPlan::default()).unwrap();
+        for (trial, length) in [(2, 20), (3, 30)] {
+            let mut r = report(trial, Phase::Eval, 0);
+            r.lengths[0] = length;
+            collector.record(&r).unwrap();
+        }
+        let greedy = collector.greedy(0).expect("greedy episodes in trials 2 and 3");
+        assert_eq!(
+            serde_json::json!(greedy.per_trial),
+            serde_json::json!([null, null, 20.0, 30.0])
+        );
+        assert_eq!((greedy.mean(), greedy.episodes), (25.0, 2));
+    }
+
+    /// A greedy report of `trial`'s evaluation episode `episode`: UAV2 flies it, UAV1 only
+    /// if given its length and whether it was truncated (it was down otherwise).
+    fn greedy_report(trial: u32, episode: u64, uav1: Option<(u32, bool)>) -> EpisodeReport {
+        let mut report =
+            EpisodeReport { trial, phase: Phase::Eval as u8, episode, ..Default::default() };
+        report.members = 0b10;
+        report.lengths[1] = 7;
+        if let Some((length, truncated)) = uav1 {
+            report.members |= 1;
+            report.lengths[0] = length;
+            report.truncated = u64::from(truncated);
+        }
+        report
+    }
+
+    /// An agent restarted during an evaluation has fewer of its greedy episodes in one
+    /// trial: the periodic evaluations (`greedy_curve.csv`) and the final one (summary.json)
+    /// are both the mean over trials of each trial's mean, whichever order the trials'
+    /// blocks end in (the periodic ones pooled the episodes, weighing the fuller trial more).
+    #[test]
+    fn periodic_and_final_greedy_means_are_means_over_trials() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        // Two blocks of two greedy episodes (0-1, 2-3), after training episodes 1 and 2;
+        // then the final evaluation (4-5).
+        let plan = EvalPlan::new(3, 1, 2);
+        let mut collector = Collector::create(dir.path(), 2, 2, plan).unwrap();
+        // Trial 1 runs behind trial 0; UAV1 is down (None) in half of trial 1's episodes.
+        for (trial, episode, uav1) in [
+            (0, 0, Some((10, false))),
+            (0, 1, Some((10, false))),
+            (0, 2, Some((20, false))),
+            (1, 0, None),
+            (1, 1, Some((40, false))),
+            (0, 3, Some((20, false))),
+            (1, 2, None),
+            (1, 3, Some((60, true))),
+            (0, 4, Some((30, false))),
+            (1, 4, None),
+            (0, 5, Some((30, false))),
+            (1, 5, Some((50, false))),
+        ] {
+            collector.record(&greedy_report(trial, episode, uav1)).unwrap();
+        }
+        // Pooled: 60 / 3 = 20, 100 / 3 and 110 / 3.
+        assert_eq!(collector.greedy_curve(0), vec![(1, 25.0, 0), (2, 40.0, 1)]);
+        let greedy = collector.greedy(0).expect("the final evaluation");
+        assert_eq!(greedy.mean(), 40.0);
+        assert_eq!(serde_json::json!(greedy.per_trial), serde_json::json!([30.0, 50.0]));
+        assert_eq!(collector.greedy_curve(1), vec![(1, 7.0, 0), (2, 7.0, 0)]);
     }
 
     /// Reports come from another process: numbers past `u64` are an error, not a panic.

@@ -136,6 +136,11 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
         assert!(RUN_OUTPUTS.contains(&name.as_str()), "`{name}` is not in RUN_OUTPUTS");
     }
     let episodes = read(&out.join("episodes.csv"));
+    let unchanged = |refused: &str| {
+        if let Some(difference) = first_difference(&read(&out.join("episodes.csv")), &episodes) {
+            panic!("the refused run ({refused}) changed the results: {difference}");
+        }
+    };
 
     let line = error_line(&as_strs(&run(&[])));
     assert!(
@@ -143,12 +148,19 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
         "{line}"
     );
     assert!(line.contains("--overwrite"), "{line}");
-    if let Some(difference) = first_difference(&read(&out.join("episodes.csv")), &episodes) {
-        panic!("the refused run changed the results: {difference}");
-    }
+    unchanged("no --overwrite");
     let line = error_line(&as_strs(&run(&["--overwrite", "--resume", &out_arg])));
     assert!(line.contains("is the results directory it would replace"), "{line}");
     assert!(out.join("qtables").join("uav1_trial0.bin").exists(), "the snapshots were removed");
+    // The copy of the tables `eval` wrote is removed with `eval/`: refused before anything
+    // is removed (the earlier run and the tables used to go, and the run failed).
+    let evaluated = out.join("eval").display().to_string();
+    let line = error_line(&as_strs(&run(&["--overwrite", "--resume", &evaluated])));
+    let expected = format!("--resume {evaluated} would be removed by --overwrite");
+    assert!(line.contains(&expected) && line.contains("give another --out"), "{line}");
+    let copied = out.join("eval").join("qtables").join("uav1_trial0.bin");
+    assert!(copied.exists(), "the snapshots to resume from were removed");
+    unchanged("--resume inside eval/");
 
     let stale = out.join("qtables").join("uav7_trial0.bin");
     std::fs::write(&stale, b"from another run").unwrap();

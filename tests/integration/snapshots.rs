@@ -2,8 +2,9 @@
 //! finished run greedily on the same setup, and `--resume DIR` continues learning from it.
 
 use crate::harness::{
-    assert_nothing_left, episode_rows, error_line, first_gap, mean_length, number, read, repo_file,
-    run_fail, run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned, SUPERVISOR,
+    assert_nothing_left, episode_rows, error_line, first_gap, mean_length, notes, number, read,
+    repo_file, run_fail, run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned,
+    SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::time::Duration;
@@ -240,4 +241,32 @@ fn an_evaluation_stopped_by_ctrl_c_exits_130_with_partial_results() {
     assert!(stdout.starts_with("UAV1 greedy episode length "), "{report}");
     assert!(String::from_utf8_lossy(&printed.stderr).contains("stopped early"), "{report}");
     assert_eq!(summary(&dir.path().join("eval"))["complete"], false);
+}
+
+/// `eval` of a run stopped by Ctrl-C evaluated what it had learned by then and said nothing
+/// of it: `"complete": true` and no notes. It says so on stderr and in its notes.
+#[test]
+fn eval_of_a_run_that_did_not_complete_says_so() {
+    let dir = scratch();
+    let out = dir.path().display().to_string();
+    let setup = words("--transport inproc --scenario s1 --uavs 1 --trials 1 --episodes 100000000");
+    let run = Spawned::supervisor(&[&setup[..], &["--quiet", "--out", &out]].concat());
+    let episodes = dir.path().join("episodes.csv");
+    wait_until("training episodes to be recorded", Duration::from_secs(60), || {
+        std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 1000)
+    });
+    run.interrupt();
+    let (stopped, report) = run.finish(Duration::from_secs(120));
+    assert_eq!(stopped.status.code(), Some(130), "{report}");
+    let printed = run_ok(SUPERVISOR, &["eval", "--qtables", &out, "--episodes", "5"]);
+    let note = format!(
+        "eval evaluates the Q-tables of a run that did not complete ({} says \"complete\": \
+         false): what it had learned when it stopped",
+        dir.path().join("summary.json").display()
+    );
+    let stderr = String::from_utf8_lossy(&printed.stderr);
+    assert!(stderr.contains(&format!("supervisor: {note}")), "{stderr}");
+    let evaluated = summary(&dir.path().join("eval"));
+    assert_eq!(evaluated["complete"], true, "the evaluation itself ran to its end");
+    assert_eq!(notes(&evaluated), [note.as_str()]);
 }
