@@ -298,7 +298,7 @@ fn serve(
         Ok(stop_answer) => {
             session.save_all()?;
             stop_answer.send()?;
-            if !ports.await_world_gone(world_timeout)? {
+            if !ports.await_world_gone(world_timeout)? && !termination_requested() {
                 tracing::warn!("the world did not leave after the stop round; leaving anyway");
             }
             return Ok(());

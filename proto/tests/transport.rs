@@ -172,17 +172,28 @@ fn the_longest_run_id_fits_every_users_socket_paths() {
     let _agent = RunServices::open(&config).unwrap().into_agent().unwrap();
     let _supervisor = RunServices::open(&config).unwrap().into_supervisor().unwrap();
     world.wait_for_peers(1, true, BOUND).unwrap();
-    let longest_root = "/tmp/flockstep-4294967295/".len();
-    let root = format!("{}/", iceoryx_root().display()).len();
     let files = leftover_files(&config.run_id).unwrap();
     let sockets: Vec<_> =
         files.iter().filter(|f| f.extension() == Some("event".as_ref())).collect();
     assert!(!sockets.is_empty(), "no event socket: {files:#?}");
+    // Each is `<root>/flockstep.<run id>.<listener id>.event`, the listener id a number.
+    let head = format!("flockstep.{}.", config.run_id);
     for socket in sockets {
-        let len = socket.as_os_str().len() - root + longest_root;
-        assert!(len <= 108, "{} would have {len} bytes", socket.display());
+        assert_eq!(socket.parent(), Some(iceoryx_root().as_path()), "{}", socket.display());
+        let name = socket.file_name().and_then(|n| n.to_str()).expect("a UTF-8 name");
+        let id = name.strip_prefix(&head).and_then(|rest| rest.strip_suffix(".event"));
+        let id = id.unwrap_or_else(|| panic!("socket `{name}` is not named as assumed"));
+        assert!(id.bytes().all(|b| b.is_ascii_digit()), "listener id `{id}`");
+        assert!(id.len() <= LISTENER_ID_DIGITS, "listener id `{id}` has more digits than assumed");
     }
+    // The longest root, for a 10-digit uid, and the most digits assumed of a listener id.
+    let worst = "/tmp/flockstep-4294967295/".len() + head.len() + LISTENER_ID_DIGITS + 6;
+    assert!(worst <= 108, "a socket path could have {worst} bytes");
 }
+
+/// The most digits a listener id has until its process made 12 000 of them (a `u128` whose
+/// top 32 bits count the ids; see `services::MAX_RUN_ID`).
+const LISTENER_ID_DIGITS: usize = 33;
 
 #[test]
 fn a_late_agent_gets_the_current_round_from_history() {

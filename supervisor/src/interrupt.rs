@@ -5,38 +5,50 @@
 //! for that round (each agent still saves its tables as it leaves).
 
 use anyhow::Result;
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
 
-/// How many times the process was interrupted.
+/// A second interrupt counts only this long after the first: one signal can arrive twice,
+/// as when coreutils `timeout` sends it to the supervisor and then to its whole process
+/// group, or a closed terminal's SIGHUP comes from the kernel and from the shell; a user
+/// who presses Ctrl-C again does so after reading "stopping".
+pub const HURRY_AFTER: Duration = Duration::from_millis(500);
+
+/// The interrupts the process received, as far as they ask for anything.
 #[derive(Debug, Default)]
 pub struct Interrupts {
-    count: AtomicU32,
+    first: OnceLock<Instant>,
+    hurry: AtomicBool,
 }
 
 impl Interrupts {
-    /// Counts Ctrl-C and SIGTERM from now on (the `ctrlc` crate's handler; it may be set once
-    /// per process).
+    /// Counts Ctrl-C and SIGTERM (and SIGHUP) from now on (the `ctrlc` crate's handler, which
+    /// runs on a thread of its own; it may be set once per process).
     pub fn catch() -> Result<Arc<Interrupts>> {
         let interrupts = Arc::new(Interrupts::default());
         let counter = interrupts.clone();
-        ctrlc::set_handler(move || counter.interrupt())?;
+        ctrlc::set_handler(move || counter.interrupt(Instant::now()))?;
         Ok(interrupts)
     }
 
-    /// Counts one interrupt.
-    pub fn interrupt(&self) {
-        self.count.fetch_add(1, Ordering::SeqCst);
+    /// Counts one interrupt received `at`.
+    pub fn interrupt(&self, at: Instant) {
+        let first = *self.first.get_or_init(|| at);
+        if at.saturating_duration_since(first) >= HURRY_AFTER {
+            self.hurry.store(true, Ordering::Relaxed);
+        }
     }
 
     /// Whether an orderly stop was asked for.
     pub fn stop_asked(&self) -> bool {
-        self.count.load(Ordering::SeqCst) >= 1
+        self.first.get().is_some()
     }
 
-    /// Whether a stop at once was asked for: a second interrupt.
+    /// Whether a stop at once was asked for: a second interrupt, [`HURRY_AFTER`] or more
+    /// after the first.
     pub fn hurry_asked(&self) -> bool {
-        self.count.load(Ordering::SeqCst) >= 2
+        self.hurry.load(Ordering::Relaxed)
     }
 }
 
@@ -45,12 +57,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_first_interrupt_asks_to_stop_and_the_second_to_hurry() {
+    fn the_first_interrupt_asks_to_stop_and_a_later_one_to_hurry() {
         let interrupts = Interrupts::default();
         assert!(!interrupts.stop_asked() && !interrupts.hurry_asked());
-        interrupts.interrupt();
+        let first = Instant::now();
+        interrupts.interrupt(first);
         assert!(interrupts.stop_asked() && !interrupts.hurry_asked());
-        interrupts.interrupt();
+        // The same signal delivered twice (`timeout` to the child, then to its group).
+        interrupts.interrupt(first + Duration::from_millis(1));
+        assert!(!interrupts.hurry_asked(), "one signal twice is one interrupt");
+        interrupts.interrupt(first + HURRY_AFTER);
         assert!(interrupts.stop_asked() && interrupts.hurry_asked());
     }
 }

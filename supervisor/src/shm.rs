@@ -9,10 +9,12 @@
 //! barrier's membership changes) is brought down and is then a failed agent too; a failed
 //! world ends the run at once, and so does an agent that fails in the barrier as the run
 //! ends (its final Q-tables are lost). Ctrl-C asks the world to stop at the end of the
-//! current round. Every child is finally brought down by the shutdown ladder and what is
-//! left of the run in shared memory removed. Agents that attach and leave are noted too.
+//! current round; a second one brings every process down without that round
+//! ([`crate::interrupt`]); Ctrl-Z pauses them all with the supervisor ([`crate::suspend`]).
+//! Every child is finally brought down by the shutdown ladder and what is left of the run in
+//! shared memory removed. Agents that attach and leave are noted too.
 
-use crate::children::{bring_all_down, shut_down, Process, TERM_GRACE};
+use crate::children::{bring_all_down, shut_down, Process};
 use crate::cli::Restart;
 use crate::config::RunConfig;
 use crate::interrupt::Interrupts;
@@ -27,8 +29,10 @@ use flockstep_proto::transport::{
     SupervisorPorts, TransportError,
 };
 use flockstep_proto::{Membership, MAX_AGENTS};
+use flockstep_world::node::EXIT_TERMINATED;
+use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
 
 /// How long the world may take to create the run's services.
@@ -238,18 +242,14 @@ impl Fleet<'_> {
         Ok(())
     }
 
-    /// Finishes bringing down the dropped agent processes (see [`Fleet::bring_down_dropped`])
-    /// once the world has exited: they would not leave by themselves, and the shutdown
-    /// ladder would first give them its grace. Bounded: SIGTERM's grace and a second for
-    /// SIGKILL to take effect, then they are left to the ladder.
-    fn finish_bringing_down(&mut self) -> Result<()> {
-        let mut due: Vec<&mut Process> = self
-            .agents
-            .iter_mut()
-            .filter(|agent| agent.to_bring_down())
-            .map(|agent| &mut agent.process)
-            .collect();
-        bring_all_down(&mut due, TERM_GRACE + Duration::from_secs(1))?;
+    /// Brings down the agent processes `which` picks, once the world has exited: dropped
+    /// ones (see [`Fleet::bring_down_dropped`]) would not leave by themselves, and the
+    /// shutdown ladder would first give them its grace. Bounded ([`bring_all_down`]), then
+    /// they are left to the ladder.
+    fn bring_agents_down(&mut self, which: fn(&AgentProcess) -> bool) -> Result<()> {
+        let mut due: Vec<&mut Process> =
+            self.agents.iter_mut().filter(|a| which(a)).map(|a| &mut a.process).collect();
+        bring_all_down(&mut due)?;
         Ok(())
     }
 
@@ -283,7 +283,8 @@ impl Fleet<'_> {
             if self.ctrl_z.requested() {
                 self.pause(recorder)?;
             }
-            if stop.hurry_asked() {
+            // Once the world has ended by itself, the run ends as it would have.
+            if stop.hurry_asked() && self.world.status()?.is_none() {
                 if !self.world.brought_down() {
                     recorder.say(
                         "stopping at once: every process is told to leave now (an agent saves \
@@ -295,7 +296,7 @@ impl Fleet<'_> {
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
                 if self.world.brought_down() {
-                    return self.finish_hurrying(recorder);
+                    return self.finish_hurrying(status, recorder);
                 }
                 if !status.success() {
                     // An agent may have failed since the last look, and be why the world did.
@@ -307,7 +308,7 @@ impl Fleet<'_> {
                         self.world.last_words()
                     );
                 }
-                self.finish_bringing_down()?;
+                self.bring_agents_down(AgentProcess::to_bring_down)?;
                 for (_, note) in self.newly_failed_agents()? {
                     recorder.note(format!("{note}; not restarted (the run has ended)"));
                 }
@@ -378,8 +379,9 @@ impl Fleet<'_> {
     }
 
     /// Takes every process that still runs a step down the shutdown ladder, without the stop
-    /// round (a second Ctrl-C): the world leaves at once; an agent leaves at its next wait
-    /// and saves its tables first (or, hung, gets SIGKILL after SIGTERM's grace).
+    /// round (a second Ctrl-C, while the world runs): the world leaves at once; an agent
+    /// leaves at its next wait and saves its tables first (or, hung, gets SIGKILL after
+    /// SIGTERM's grace).
     fn hurry(&mut self) -> Result<()> {
         for process in self.processes() {
             if process.status()?.is_none() {
@@ -389,18 +391,23 @@ impl Fleet<'_> {
         Ok(())
     }
 
-    /// Ends a run stopped at once, once the world has left: brings the agents down (bounded
-    /// as in [`Fleet::finish_bringing_down`]) and notes how each one that had not already
-    /// failed left, with its last words (where its tables are, or why they are not).
-    fn finish_hurrying(&mut self, recorder: &mut Recorder) -> Result<Outcome> {
-        let mut agents: Vec<&mut Process> =
-            self.agents.iter_mut().map(|agent| &mut agent.process).collect();
-        bring_all_down(&mut agents, TERM_GRACE + Duration::from_secs(1))?;
+    /// Ends a run stopped at once, once the world has left (`world`, its exit): brings the
+    /// agents down and notes how each one that had not already failed left, with its last
+    /// words (where its tables are, or why they are not), and a world that failed by itself
+    /// rather than leave as asked.
+    fn finish_hurrying(&mut self, world: ExitStatus, recorder: &mut Recorder) -> Result<Outcome> {
+        self.bring_agents_down(|_| true)?;
         recorder.note(
             "stopped at once by a second Ctrl-C or SIGTERM: the processes left without the \
              stop round, each at its next wait"
                 .to_string(),
         );
+        let left_as_asked = world.code() == Some(EXIT_TERMINATED.into())
+            || matches!(world.signal(), Some(libc::SIGTERM | libc::SIGKILL));
+        if !left_as_asked {
+            recorder
+                .note(format!("the world process failed ({world}): {}", self.world.last_words()));
+        }
         for AgentProcess { process, noted, .. } in &mut self.agents {
             let Some(status) = process.status()? else { continue };
             if !status.success() && !*noted {

@@ -5,8 +5,8 @@
 //! up, the supervisor therefore catches SIGTSTP and passes it on: it stops its children
 //! (SIGSTOP), then itself, and continues them once it is continued (`fg`, `bg`, SIGCONT).
 //! Their waits do not count the time they were stopped (`PAUSE_GAP` in
-//! `proto/src/transport/wait.rs`), so the run resumes where it was. A SIGSTOP sent to the supervisor alone
-//! cannot be caught and stops it alone.
+//! `proto/src/transport/wait.rs`), so the run resumes where it was. A SIGSTOP sent to the
+//! supervisor alone cannot be caught and stops it alone.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 

@@ -139,8 +139,6 @@ fn an_agent_with_a_missing_resume_directory_exits_before_it_joins() {
     run.interrupt();
     let (status, report) = run.finish(BOUND);
     assert_eq!(status.status.code(), Some(130), "the run ends only on Ctrl-C\n{report}");
-    let log = world_log(dir.path());
-    assert!(!log.contains("uav=3"), "the agent took route 3:\n{log}");
     let s = crate::harness::summary(dir.path());
     assert_eq!(s["notes"], serde_json::json!([]), "{s:#}");
     assert_nothing_left(&id);

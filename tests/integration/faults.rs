@@ -11,6 +11,7 @@ use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
+use flockstep_supervisor::interrupt::HURRY_AFTER;
 use std::time::{Duration, Instant};
 
 const DEADLOCK: Duration = Duration::from_secs(120);
@@ -861,11 +862,9 @@ fn a_second_ctrl_c_stops_at_once_without_waiting_for_a_hung_agent() {
     ));
     wait_for_agent(&id, 2);
     run.interrupt();
-    let log = dir.path().join("logs").join("uav2.log");
-    wait_until("UAV2 to hang in the stop round", DEADLOCK, || {
-        std::fs::read_to_string(&log).is_ok_and(|text| text.contains("hanging here"))
-    });
-    run.interrupt();
+    let first = Instant::now();
+    wait_for_hang(dir.path(), 2);
+    interrupt_again(&run, first);
     let (status, report) = run.finish(DEADLOCK);
     assert_eq!(status.status.code(), Some(130), "stopped, not failed\n{report}");
     let world = world_log(dir.path());
@@ -877,6 +876,55 @@ fn a_second_ctrl_c_stops_at_once_without_waiting_for_a_hung_agent() {
     assert!(notes.iter().any(|n| n.starts_with("UAV2 left (exit status: 1)")), "{notes:?}");
     assert!(!notes.iter().any(|n| n.starts_with("UAV1")), "UAV1 left in order: {notes:?}");
     snapshot(dir.path(), 1, 0);
+    assert_nothing_left(&id);
+}
+
+/// Waits until agent `uav`'s log says it hangs (`--fault hang-at-...`).
+fn wait_for_hang(dir: &std::path::Path, uav: usize) {
+    let log = dir.join("logs").join(format!("uav{uav}.log"));
+    wait_until(&format!("UAV{uav} to hang"), DEADLOCK, || {
+        std::fs::read_to_string(&log).is_ok_and(|text| text.contains("hanging here"))
+    });
+}
+
+/// Presses Ctrl-C again, as a user does after reading "stopping": well over [`HURRY_AFTER`]
+/// after the first press, sent at `first` and taken by the supervisor a little later (a
+/// quicker one is taken for the same signal delivered twice).
+fn interrupt_again(run: &Spawned, first: Instant) {
+    let due = first + HURRY_AFTER * 2;
+    std::thread::sleep(due.saturating_duration_since(Instant::now()));
+    run.interrupt();
+}
+
+/// A second Ctrl-C while an agent hangs in training, the world waiting for its answer (the
+/// first Ctrl-C cannot start the stop round then): every process leaves at once, and the
+/// agent that was waiting for the world saves its tables as it leaves, and says where.
+#[test]
+fn a_second_ctrl_c_in_training_saves_the_tables_of_every_agent_that_can() {
+    let dir = scratch();
+    let (id, out) = (run_id("hurry-train"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1 --seed 98 --agent-timeout-ms 60000 --fault 2=hang-at-round=3000"),
+    ));
+    wait_for_hang(dir.path(), 2);
+    run.interrupt();
+    interrupt_again(&run, Instant::now());
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "stopped, not failed\n{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false, "{s:#}");
+    let notes = notes(&s);
+    assert!(notes.iter().any(|n| n.starts_with("stopped at once by a second Ctrl-C")), "{notes:?}");
+    assert!(
+        notes.iter().any(|n| n.starts_with("UAV1 left (exit status: 1)")
+            && n.contains("its Q-tables are saved in")),
+        "{notes:?}"
+    );
+    assert!(notes.iter().any(|n| n.starts_with("UAV2 left (exit status: 1)")), "{notes:?}");
+    assert!(!notes.iter().any(|n| n.contains("world process failed")), "{notes:?}");
+    assert!(snapshot(dir.path(), 1, 0).episodes > 0, "UAV1's tables as it left");
     assert_nothing_left(&id);
 }
 

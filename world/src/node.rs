@@ -81,10 +81,19 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             flockstep_proto::output::message(&format!("world: error: {e:#}"));
-            std::process::ExitCode::FAILURE
+            if flockstep_proto::transport::termination_requested() {
+                std::process::ExitCode::from(EXIT_TERMINATED)
+            } else {
+                std::process::ExitCode::FAILURE
+            }
         }
     }
 }
+
+/// The world's exit status when it left because SIGTERM asked it to (128 + SIGTERM, as a
+/// shell reports a process SIGTERM ended): the supervisor tells a world it brought down from
+/// one that failed by itself.
+pub const EXIT_TERMINATED: u8 = 143;
 
 pub fn run(args: &WorldArgs) -> Result<()> {
     let run = RunConfig::new(&args.run_id, SignalMode::Supervised);

@@ -53,14 +53,16 @@ pub const STALLS_TO_BACK_OFF: u32 = 3;
 /// See [`STALLS_TO_BACK_OFF`].
 pub const STALL_WINDOW: Duration = Duration::from_millis(50);
 
-/// A look at the clock this much later than the waiter's own block explains means the
-/// process did not run in between: stopped (SIGSTOP, or Ctrl-Z, which the supervisor passes
-/// on to the whole run) or the machine suspended. That time does not count against a
-/// wait's deadline: a paused run resumes where it was instead of every process presuming
-/// its peers dead (they were paused too, and get as long to answer as before). A process
-/// that runs while its peer is stopped still sees the peer silent. A time slice lost to
-/// other processes, a few milliseconds even on a loaded machine, stays well below it.
-pub const PAUSE_GAP: Duration = Duration::from_secs(1);
+/// The most one look at the clock counts against a wait's deadline beyond the block before
+/// it. Later than that, the process did not run in between: stopped (SIGSTOP, or Ctrl-Z,
+/// which the supervisor passes on to the whole run) or starved; the rest of the gap does
+/// not count. So a paused run resumes where it was instead of every process presuming its
+/// peers dead (they were paused too, and get the rest of their time to answer), however
+/// short the pause. A process that runs while its peer is stopped still sees the peer
+/// silent, and a waiter still times out, if late, when every look comes late: each counts
+/// its block and this much. Time slices lost to other processes, a few milliseconds, stay
+/// below it even on a loaded machine.
+pub const PAUSE_GAP: Duration = Duration::from_millis(100);
 
 impl WaitPolicy {
     /// Blocks on the event at once: the least CPU, the most wake-up latency.
@@ -216,11 +218,8 @@ impl Waiter {
                 return Ok(found);
             }
             let now = Instant::now();
-            let gap = now - last_look;
             // At most one slice was slept since the last look (none before the first).
-            if gap > self.policy.slice + PAUSE_GAP {
-                paused += gap - self.policy.slice;
-            }
+            paused += (now - last_look).saturating_sub(self.policy.slice + PAUSE_GAP);
             last_look = now;
             let waited = (now - start).saturating_sub(paused);
             if waited >= timeout {
@@ -336,26 +335,39 @@ mod tests {
         }
     }
 
-    /// A process stopped in the middle of a wait (here: a poll that takes longer than
-    /// [`PAUSE_GAP`], as the look after a SIGSTOP does) does not have that time counted
-    /// against the deadline; a gap below it still counts.
+    /// A process stopped in the middle of a wait (here: a poll that takes as long, as the
+    /// look after a SIGSTOP does) has at most [`PAUSE_GAP`] of that time counted against the
+    /// deadline, so a pause longer than the deadline does not end the wait.
     #[test]
     fn time_the_waiter_was_stopped_does_not_count_against_its_deadline() {
         let ports = world_waiting_with("paused", WaitPolicy::BLOCK);
-        let wait_across = |gap: Duration| {
-            let mut polls = 0u32;
-            ports.waiter().wait(&"an answer", Duration::from_millis(300), || {
-                polls += 1;
-                if polls == 2 {
-                    std::thread::sleep(gap);
-                }
-                Ok((polls == 4).then_some(polls))
-            })
-        };
-        let paused = wait_across(PAUSE_GAP + Duration::from_millis(500));
-        assert_eq!(paused.expect("the pause is not waiting"), 4);
-        let slow = wait_across(Duration::from_millis(400));
-        assert!(matches!(slow, Err(TransportError::Timeout { .. })), "{slow:?}");
+        let mut polls = 0u32;
+        let timeout = Duration::from_millis(300);
+        let found = ports.waiter().wait(&"an answer after a pause", timeout, || {
+            polls += 1;
+            if polls == 2 {
+                std::thread::sleep(timeout * 2);
+            }
+            Ok((polls == 4).then_some(polls))
+        });
+        assert_eq!(found.expect("the pause is not waiting"), 4);
+    }
+
+    /// A waiter all of whose looks come late (starved, or a poll that blocks) still times
+    /// out: each look counts its block and [`PAUSE_GAP`], so the deadline is reached within
+    /// a bounded number of looks.
+    #[test]
+    fn a_waiter_whose_every_look_comes_late_still_times_out() {
+        let ports = world_waiting_with("late", WaitPolicy::BLOCK);
+        let mut polls = 0u32;
+        let waited = ports.waiter().wait(&"nothing", Duration::from_millis(250), || {
+            polls += 1;
+            std::thread::sleep(PAUSE_GAP * 3);
+            Ok(None::<()>)
+        });
+        assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{waited:?}");
+        // 250 ms at 110 ms or more a look: at most 4 looks (the first counts nothing).
+        assert!(polls <= 4, "{polls} looks before the timeout");
     }
 
     /// After `stalls` waits whose yielding stalled, a wait with an answer on its third poll:
