@@ -80,7 +80,11 @@ pub enum TransportError {
     Io { what: String, cause: std::io::Error },
     /// This user's iceoryx2 root ([`iceoryx_root`]) exists but cannot be trusted with the
     /// run's files.
-    #[error("iceoryx2 root `{}` {problem}", path.display())]
+    #[error(
+        "iceoryx2 root `{}` {problem}; it must be a private directory of this user: remove it \
+         (its owner may have to) and a run makes one",
+        path.display()
+    )]
     UnsafeRoot { path: PathBuf, problem: String },
 }
 

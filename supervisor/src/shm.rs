@@ -86,7 +86,11 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
 /// given twice): this run's world would fail to create its services, after its supervisor
 /// had opened the other run's.
 pub fn prepare(run_id: &str) -> Result<()> {
-    let swept = sweep_stale_runs().context("cleaning stale resources of earlier runs")?;
+    let swept = sweep_stale_runs().map_err(|e| match e {
+        // Not about the earlier runs: this user's root itself is refused, and says why.
+        TransportError::UnsafeRoot { .. } => anyhow::Error::new(e),
+        e => anyhow::Error::new(e).context("cleaning stale resources of earlier runs"),
+    })?;
     if !swept.runs_cleaned.is_empty() {
         tracing::info!(runs = ?swept.runs_cleaned, "removed stale resources of dead runs");
     }
@@ -360,6 +364,10 @@ impl Fleet<'_> {
     /// continues the agents, then the world (see [`crate::suspend`]), and notes the pause
     /// (the run's timings include it).
     fn pause(&mut self, recorder: &mut Recorder) -> Result<()> {
+        // Continued before it took effect (`kill -TSTP` then `kill -CONT` at once): no pause.
+        if self.ctrl_z.continued() {
+            return Ok(());
+        }
         recorder.say("pausing (Ctrl-Z): the world and the agents stop with the supervisor");
         for process in self.processes() {
             if process.status()?.is_none() {
@@ -371,10 +379,12 @@ impl Fleet<'_> {
         for process in processes.iter().rev() {
             process.resume();
         }
-        recorder.note(format!(
-            "paused for {:.1} s by Ctrl-Z (the timings include it)",
-            paused.as_secs_f64()
-        ));
+        if let Some(paused) = paused {
+            recorder.note(format!(
+                "paused for {:.1} s by Ctrl-Z (the timings include it)",
+                paused.as_secs_f64()
+            ));
+        }
         Ok(())
     }
 
