@@ -12,6 +12,13 @@ const BOUND: Duration = Duration::from_secs(120);
 /// Well below the 30 s an agent waits for admission: a refused agent exits long before.
 const AT_ONCE: Duration = Duration::from_secs(10);
 
+/// A run of two starting agents on `scenario` that lasts until it is stopped (Ctrl-C).
+fn run_until_stopped(id: &str, out: &str, scenario: &str) -> Spawned {
+    let args = ["--transport", "shm", "--run-id", id, "--out", out, "--quiet", "--scenario"];
+    let rest = [scenario, "--uavs", "2", "--episodes", "10000000", "--trials", "1"];
+    Spawned::start(SUPERVISOR, &[&args[..], &rest[..]].concat())
+}
+
 /// Before, an agent that asked for a route of its own (`--uav N`) ignored the world's
 /// refusal and asked again until its 30 s wait ran out, then said only that it timed out
 /// waiting for admission. Now each refusal ends it at once with one line naming the flag
@@ -21,26 +28,7 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
     let dir = scratch();
     let (id, out) = (run_id("refused"), dir.path().display().to_string());
     // s3 has two routes, both taken by the starting agents; the run lasts until stopped.
-    let run = Spawned::start(
-        SUPERVISOR,
-        &[
-            "--transport",
-            "shm",
-            "--run-id",
-            &id,
-            "--out",
-            &out,
-            "--quiet",
-            "--scenario",
-            "s3",
-            "--uavs",
-            "2",
-            "--episodes",
-            "10000000",
-            "--trials",
-            "1",
-        ],
-    );
+    let run = run_until_stopped(&id, &out, "s3");
     // Both routes are taken once the last starting agent runs.
     wait_for_agent(&id, 2);
     let cases = [
@@ -108,26 +96,7 @@ fn an_agent_with_a_missing_resume_directory_exits_before_it_joins() {
     let dir = scratch();
     let (id, out) = (run_id("resume-missing"), dir.path().display().to_string());
     // s4 has three routes: the third is free for an attaching agent.
-    let run = Spawned::start(
-        SUPERVISOR,
-        &[
-            "--transport",
-            "shm",
-            "--run-id",
-            &id,
-            "--out",
-            &out,
-            "--quiet",
-            "--scenario",
-            "s4",
-            "--uavs",
-            "2",
-            "--episodes",
-            "10000000",
-            "--trials",
-            "1",
-        ],
-    );
+    let run = run_until_stopped(&id, &out, "s4");
     wait_for_agent(&id, 2);
     let missing = dir.path().join("no-such-run");
     let args = ["--attach", &id, "--out", &out, "--resume", &missing.display().to_string()];
