@@ -369,11 +369,7 @@ impl Fleet<'_> {
             return Ok(());
         }
         recorder.say("pausing (Ctrl-Z): the world and the agents stop with the supervisor");
-        for process in self.processes() {
-            if process.status()?.is_none() {
-                process.pause();
-            }
-        }
+        self.each_running(|process| process.pause())?;
         let paused = self.ctrl_z.stop_self();
         let processes: Vec<&mut Process> = self.processes().collect();
         for process in processes.iter().rev() {
@@ -393,9 +389,14 @@ impl Fleet<'_> {
     /// leaves at its next wait and saves its tables first (or, hung, gets SIGKILL after
     /// SIGTERM's grace).
     fn hurry(&mut self) -> Result<()> {
+        self.each_running(Process::bring_down)
+    }
+
+    /// Takes `step` on every process of the run that still runs.
+    fn each_running(&mut self, step: fn(&mut Process)) -> Result<()> {
         for process in self.processes() {
             if process.status()?.is_none() {
-                process.bring_down();
+                step(process);
             }
         }
         Ok(())
