@@ -119,8 +119,7 @@ impl Snapshot {
             }
         };
         check("scenario", &self.scenario, learned.scenario.name())?;
-        let map = learned.scenario.map().to_text();
-        if let Some(difference) = TextDifference::of(&self.map, &map, "") {
+        if let Some(difference) = TextDifference::of(&self.map, learned.scenario.map_text(), "") {
             return Err(SnapshotError::Map { name: self.scenario.clone(), difference });
         }
         check("communication mode", self.comm.name(), learned.comm.name())?;
@@ -221,7 +220,7 @@ fn encode_snapshot(agent: &TrialAgent, trial: usize, learned: &Learned) -> Vec<u
     let snapshot = SnapshotOf {
         format: FORMAT,
         scenario: learned.scenario.name(),
-        map: &learned.scenario.map().to_text(),
+        map: learned.scenario.map_text(),
         slot: agent.slot() as u32,
         trial: trial as u32,
         comm: learned.comm,
@@ -373,7 +372,7 @@ mod tests {
             Snapshot {
                 format: FORMAT,
                 scenario: learned.scenario.name().to_string(),
-                map: learned.scenario.map().to_text(),
+                map: learned.scenario.map_text().to_string(),
                 slot: agent.slot() as u32,
                 trial: trial as u32,
                 comm: learned.comm,

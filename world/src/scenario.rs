@@ -45,6 +45,8 @@ pub(crate) fn state_pose(index: usize) -> Pose {
 pub struct Scenario {
     map: MapFile,
     source_text: String,
+    /// The map in canonical text form, rendered once when first asked for.
+    map_text: std::sync::OnceLock<String>,
     /// Visible-target masks of every route's states, routes one after the other.
     table: Vec<u64>,
     /// `table[offsets[u]..offsets[u + 1]]` is UAV `u`'s slice.
@@ -104,7 +106,8 @@ impl Scenario {
             }
             offsets.push(table.len());
         }
-        let scenario = Scenario { map, source_text, table, offsets };
+        let map_text = std::sync::OnceLock::new();
+        let scenario = Scenario { map, source_text, map_text, table, offsets };
         // The map's own claims first: a failed fact says most precisely what is wrong.
         for fact in &scenario.map.expects {
             scenario.check_fact(source, fact)?;
@@ -229,6 +232,12 @@ impl Scenario {
     /// The parsed map.
     pub fn map(&self) -> &MapFile {
         &self.map
+    }
+
+    /// The map in canonical text form ([`MapFile::to_text`]): what a snapshot records of the
+    /// map it was learned on, and compares when loaded. Rendered once, on first use.
+    pub fn map_text(&self) -> &str {
+        self.map_text.get_or_init(|| self.map.to_text())
     }
 
     /// The text the map was read from, to be copied into a run's results.
