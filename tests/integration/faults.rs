@@ -151,7 +151,9 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
         let run = Spawned::supervisor(&run_args(
             &id,
             &out,
-            &words("--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 51"),
+            &words(
+                "--scenario s3 --uavs 2 --episodes 2000 --trials 1 --seed 51 --eval-episodes 200",
+            ),
         ));
         wait_for_agent(&id, 2);
         std::thread::sleep(Duration::from_millis(50 + random.below(600)));
@@ -410,7 +412,7 @@ fn an_agent_killed_in_the_final_evaluation_is_restarted_with_its_trained_tables(
     let run = Spawned::supervisor(&run_args(
         &id,
         &out,
-        &words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed 82 --eval-episodes 20000 --tick-cap 100 --restart on-failure"),
+        &words("--scenario s3 --uavs 2 --episodes 1000 --trials 2 --seed 82 --eval-episodes 4000 --tick-cap 100 --restart on-failure"),
     ));
     wait_until("UAV1's tables saved as each trial's evaluation began", DEADLOCK, || {
         (0..2).all(|trial| saved(dir.path(), 1, trial).is_some_and(|s| s.episodes == 1000))
@@ -793,7 +795,7 @@ fn an_agent_that_hangs_in_the_stop_round_fails_the_run() {
     let run = Spawned::supervisor(&run_args(
         &id,
         &out,
-        &words("--scenario s3 --uavs 2 --episodes 300 --trials 1 --seed 97 --fault 2=hang-at-stop"),
+        &words("--scenario s3 --uavs 2 --episodes 300 --trials 1 --seed 97 --eval-episodes 20 --fault 2=hang-at-stop"),
     ));
     let (status, report) = run.finish(DEADLOCK);
     assert_eq!(status.status.code(), Some(1), "{report}");
