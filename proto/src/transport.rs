@@ -143,6 +143,9 @@ pub fn iceoryx_config(run_id: &str) -> Result<Config, TransportError> {
     let mut config = default_config()?;
     config.global.prefix = FileName::new(run_prefix(run_id).as_bytes())
         .map_err(|e| TransportError::InvalidRunId(format!("run id `{run_id}`: {e:?}")))?;
+    // Dead nodes are removed through `cleanup_run` and `RunServices::cleanup_dead_nodes`,
+    // which first remove what iceoryx2 would wait on for good (see `remove_empty_segments`).
+    config.global.node.cleanup_dead_nodes_on_creation = false;
     Ok(config)
 }
 

@@ -493,6 +493,114 @@ fn a_killed_world_is_swept() {
     assert!(!sweep.live_runs.contains(&config.run_id), "{sweep:?}");
 }
 
+/// What an agent SIGKILLed while it created its ports was seen to leave (5 and 1 of 60 agents
+/// killed 0 to 40 ms after they started): a half-made port tag in its node's directory (not
+/// yet readable, so iceoryx2 does not list it), on which iceoryx2's clean-up of the node
+/// fails after it removed the node's details, leaving what nothing removed; and an empty
+/// event segment in /dev/shm. Made here by adding both to a killed world's files.
+#[test]
+fn what_a_node_killed_while_it_created_a_port_leaves_is_swept() {
+    use std::os::unix::fs::PermissionsExt;
+    let _sweeps = dead_nodes_lock();
+    let config = run("halfmade");
+    spawn_and_kill(&config, "world");
+    let prefix = format!("flockstep.{}.", config.run_id);
+    let node_dir = leftover_files(&config.run_id)
+        .unwrap()
+        .iter()
+        .filter_map(|file| file.parent().map(std::path::Path::to_path_buf))
+        .find(|dir| dir.parent() == Some(iceoryx_root().join("nodes").as_path()))
+        .expect("the killed world's node directory");
+    let half_made = |path: std::path::PathBuf, mode: u32| {
+        std::fs::write(&path, b"").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+        path
+    };
+    let tag = half_made(node_dir.join(format!("{prefix}1234.port_tag")), 0o600);
+    let event = half_made(format!("/dev/shm/{prefix}abcd_1234.event_mgmt").into(), 0o200);
+
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+    assert!(!node_dir.exists() && !tag.exists() && !event.exists(), "{node_dir:?}");
+}
+
+/// An agent killed between writing its node's details and completing the node's monitor (2
+/// of about 500 agents killed 0 to 40 ms after they started: one before the monitor, one
+/// while it was made) leaves a node that nothing lists. The sweep finds the run by it and
+/// removes it; a node still starting, whose process holds its details open, is kept. Made
+/// here by hand, as iceoryx2 lays them out.
+#[test]
+fn nodes_that_died_as_they_started_are_swept_and_one_starting_is_kept() {
+    use std::os::unix::fs::PermissionsExt;
+    let _sweeps = dead_nodes_lock();
+    let config = run("diedstarting");
+    cleanup_run(&config.run_id).expect("this user's iceoryx2 root");
+    let nodes = iceoryx_root().join("nodes");
+    let prefix = format!("flockstep.{}.", config.run_id);
+    // Node ids of this test process: a failed run's directories do not meet the next run's.
+    let node = |last_digit: u32| {
+        let node_id = format!("4242{:010}{last_digit}", std::process::id());
+        let dir = nodes.join(&node_id);
+        std::fs::create_dir_all(&dir).unwrap();
+        let details = dir.join(format!("{prefix}node.details"));
+        std::fs::write(&details, b"written, not yet made read-only").unwrap();
+        (dir, details, node_id)
+    };
+    let (before_monitor, _, _) = node(1);
+    let (making_monitor, _, node_id) = node(2);
+    let monitor: Vec<_> = ["", "_owner_lock", "_context"]
+        .iter()
+        .map(|suffix| nodes.join(format!("{prefix}{node_id}.node_monitor{suffix}")))
+        .collect();
+    for file in &monitor {
+        std::fs::write(file, b"").unwrap();
+        std::fs::set_permissions(file, std::fs::Permissions::from_mode(0o200)).unwrap();
+    }
+    let (starting, details, _) = node(3);
+    let held = std::fs::File::open(&details).unwrap();
+
+    let sweep = sweep_stale_runs().unwrap();
+    assert!(!before_monitor.exists(), "died before its monitor, left: {sweep:?}");
+    let left: Vec<_> = monitor.iter().filter(|file| file.exists()).collect();
+    assert!(!making_monitor.exists() && left.is_empty(), "died making its monitor, left {left:?}");
+    assert!(starting.exists(), "the directory of a node still starting was removed");
+    drop(held);
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty() && !starting.exists(), "left behind: {after:#?}");
+}
+
+/// A process killed between creating a segment and sizing it leaves an empty one; iceoryx2,
+/// removing the dead process's ports, waited on it for good (the world hung, and so did every
+/// later start-up sweep). Made here by emptying a segment of a killed run; the clean-up runs
+/// on a thread so that a hang fails the test instead of stopping it.
+#[test]
+fn an_empty_segment_of_a_killed_process_does_not_hang_the_clean_up() {
+    let _sweeps = dead_nodes_lock();
+    let config = run("emptyseg");
+    let (mut world, _, _) = spawn_child(&config, "world");
+    spawn_and_kill(&config, "agent");
+    world.kill().unwrap();
+    world.wait().unwrap();
+    let segments = leftover_files(&config.run_id).unwrap();
+    let connection = segments
+        .iter()
+        .find(|path| path.to_string_lossy().ends_with(".connection"))
+        .unwrap_or_else(|| panic!("no connection segment among {segments:#?}"));
+    std::fs::OpenOptions::new().write(true).open(connection).unwrap().set_len(0).unwrap();
+
+    let (done, cleaned) = std::sync::mpsc::channel();
+    let run_id = config.run_id.clone();
+    std::thread::spawn(move || done.send(cleanup_run(&run_id)));
+    let cleaned = cleaned.recv_timeout(BOUND * 2).expect("the clean-up hung").unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (2, 0), "{cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+}
+
 /// Removes a directory when dropped, so a failing test leaves nothing in /dev/shm.
 struct RemoveDir(std::path::PathBuf);
 
@@ -521,7 +629,7 @@ fn a_run_whose_files_cannot_be_removed_does_not_stop_the_sweep() {
     let sweep = sweep_stale_runs().expect("the sweep goes on past a run it cannot clean");
     let failed = sweep.failed.iter().find(|(id, _)| *id == stuck.run_id);
     let (_, error) = failed.unwrap_or_else(|| panic!("the stuck run is not reported: {sweep:?}"));
-    assert!(error.contains("removing shared memory") && error.contains("stuck"), "{error}");
+    assert!(error.contains("removing /dev/shm/") && error.contains("stuck"), "{error}");
     let left = leftover_files(&stale.run_id).unwrap();
     assert!(left.is_empty(), "the run after the stuck one was not cleaned: {left:#?}");
     assert!(cleanup_run(&stuck.run_id).is_err(), "cleaning the stuck run itself still fails");

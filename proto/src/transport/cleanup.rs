@@ -1,10 +1,12 @@
-//! Clean-up of a run's files: dead nodes' resources, and the node-id counter segment iceoryx2
-//! keeps per prefix, which nothing in iceoryx2 removes. Also lists what a run left behind, so
-//! tests and the supervisor can check that a shutdown was clean.
+//! Clean-up of a run's files: dead nodes' resources, and what iceoryx2 itself never removes
+//! (the node-id counter segment it keeps per prefix, and the remnants of a process killed
+//! while it created a file). Also lists what a run left behind, so tests and the
+//! supervisor can check that a shutdown was clean.
 
 use super::root::effective_uid;
 use super::{run_prefix, setup, Ipc, TransportError, PREFIX_HEAD};
 use crate::services;
+use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use std::collections::BTreeSet;
 use std::os::unix::fs::MetadataExt;
@@ -22,22 +24,37 @@ pub struct RunCleanup {
     /// Nodes alive, or that could not be inspected or removed; while there are any, the run
     /// keeps its node-id counter segment.
     pub live_nodes: usize,
-    /// Files of the run removed besides the nodes' own (the node-id counter segment).
+    /// Files of the run removed besides the nodes' own: empty segments and, once no node was
+    /// left, the node-id counter segment.
     pub files: usize,
 }
 
-/// Removes what a run left behind: the resources of its dead nodes and, once no node of the
-/// run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that iceoryx2 keeps
-/// in `/dev/shm` for the life of the machine (only this user's: see [`names_owned_by`]).
+/// Removes what a run left behind: the resources of its dead nodes, what iceoryx2 never
+/// removes of a process killed as it created a file (see [`remove_empty_segments`],
+/// [`remove_nodes_that_died_starting`], [`remove_node_without_details`]) and, once no node
+/// of the run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that
+/// iceoryx2 keeps in `/dev/shm` for the life of the machine (only this user's: see
+/// [`names_owned_by`]).
 pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     let config = super::iceoryx_config(run_id)?;
-    let mut report = RunCleanup::default();
+    let mut report = RunCleanup {
+        files: remove_empty_segments(run_id)?,
+        dead_nodes: remove_nodes_that_died_starting(&config, &run_prefix(run_id))?,
+        live_nodes: 0,
+    };
     Node::<Ipc>::list(&config, |state| {
         match state {
             NodeState::Dead(dead) => {
                 // Waits briefly if another process is cleaning the same node. A node that
                 // cannot be removed (permissions) still holds the run's files.
-                if dead.blocking_remove_stale_resources(Duration::from_millis(100)).is_ok() {
+                let node_id = dead.id().value();
+                let removed = if dead.details().is_none() {
+                    remove_node_without_details(&config, node_id).is_ok()
+                } else {
+                    dead.blocking_remove_stale_resources(Duration::from_millis(100)).is_ok()
+                        || remove_node_without_details(&config, node_id).is_ok_and(|done| done)
+                };
+                if removed {
                     report.dead_nodes += 1;
                 } else {
                     report.live_nodes += 1;
@@ -49,12 +66,11 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     })
     .map_err(|e| setup(run_id, "listing the run's nodes", e))?;
     if report.live_nodes == 0 {
-        let suffix = std::str::from_utf8(config.global.node.global_mgmt_suffix.as_bytes())
-            .unwrap_or(".global_mgmt");
+        let suffix = String::from_utf8_lossy(config.global.node.global_mgmt_suffix.as_bytes());
         let prefix = run_prefix(run_id);
         for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
-            if name.starts_with(&prefix) && name.ends_with(suffix) {
-                shm_unlink(&name)?;
+            if name.starts_with(&prefix) && name.ends_with(&*suffix) {
+                remove_file(&StdPath::new(SHM_DIR).join(name))?;
                 report.files += 1;
             }
         }
@@ -62,19 +78,121 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     Ok(report)
 }
 
-fn shm_unlink(name: &str) -> Result<(), TransportError> {
-    let io = |cause| TransportError::Io { what: format!("removing shared memory `{name}`"), cause };
-    let c_name =
-        std::ffi::CString::new(format!("/{name}")).map_err(|e| io(std::io::Error::other(e)))?;
-    // SAFETY: a valid NUL-terminated name.
-    if unsafe { libc::shm_unlink(c_name.as_ptr()) } != 0 {
-        let e = std::io::Error::last_os_error();
-        // Someone else removed it first: the goal is reached.
-        if e.kind() != std::io::ErrorKind::NotFound {
-            return Err(io(e));
+/// Removes the run's empty segments in `/dev/shm` that no process has open: left by a
+/// process killed between creating a segment and giving it its size. iceoryx2 must never
+/// meet one while it removes a dead node's resources: opening it waits for a size that never
+/// comes, without the timeout its other waits have (0.10 `posix_shared_memory::open_impl`,
+/// `MappingSizeIsZero`), so the world, or the supervisor's start-up sweep, hung for good
+/// (4 of about 1 000 agents killed 0 to 40 ms after they started). A segment still being
+/// created is empty too, but its creator holds it open. Returns how many were removed.
+pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportError> {
+    let prefix = run_prefix(run_id);
+    let mut removed = 0;
+    for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
+        let path = StdPath::new(SHM_DIR).join(&name);
+        let empty = std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == 0);
+        if name.starts_with(&prefix) && empty && !held_open(&path) {
+            remove_file(&path)?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// Removes what is left of a dead node whose details are gone, which iceoryx2 never does:
+/// it removes a dead node's resources by the configuration kept in its details, and without
+/// them looks under the default one. Such a node is one killed while it created a port or
+/// service tag, whose clean-up then removed its details and failed: iceoryx2 does not list a
+/// half-made tag (one still writable), so it is not removed and the node's directory
+/// cannot be (5 of 60 agents killed 0 to 40 ms after they started left one). Its directory
+/// holds only half-made files then; one that holds any other is not such a node, and an
+/// empty or missing one is a node another process's clean-up is finishing. Returns whether
+/// it removed the node.
+fn remove_node_without_details(config: &Config, node_id: u128) -> std::io::Result<bool> {
+    let node_id = node_id.to_string();
+    let dir = std_path(&config.global.node_dir()).join(&node_id);
+    let Ok(entries) = std::fs::read_dir(&dir) else { return Ok(false) };
+    let modes: Vec<u32> =
+        entries.flatten().filter_map(|e| e.metadata().ok()).map(|m| m.mode()).collect();
+    // Made read-only once complete, as every iceoryx2 file in a node's directory.
+    if modes.is_empty() || modes.iter().any(|mode| mode & 0o200 == 0) {
+        return Ok(false);
+    }
+    remove_node_files(config, &node_id)?;
+    Ok(true)
+}
+
+/// Removes the directories and monitors of the run's nodes whose process died as the node
+/// started, which nothing lists: iceoryx2 writes a node's details, then creates the monitor
+/// that lists the node once complete (of about 500 agents killed 0 to 40 ms after they
+/// started, one died before the monitor, one while it was made). A node still starting looks
+/// the same, but its process holds its details open from their creation on. Returns how many
+/// were removed.
+fn remove_nodes_that_died_starting(config: &Config, prefix: &str) -> Result<usize, TransportError> {
+    let uid = effective_uid();
+    let node_dir = std_path(&config.global.node_dir());
+    let monitor_suffix = String::from_utf8_lossy(config.global.node.monitor_suffix.as_bytes());
+    let mut removed = 0;
+    for node_id in names_owned_by(&node_dir, uid)? {
+        let dir = node_dir.join(&node_id);
+        let monitor = node_dir.join(format!("{prefix}{node_id}{monitor_suffix}"));
+        // Made readable once complete, as every iceoryx2 file.
+        let monitored = std::fs::metadata(&monitor).is_ok_and(|m| m.mode() & 0o400 != 0);
+        if monitored || !dir.is_dir() {
+            continue;
+        }
+        let files = names_owned_by(&dir, uid)?;
+        let of_this_run = !files.is_empty() && files.iter().all(|name| name.starts_with(prefix));
+        if of_this_run && !files.iter().any(|name| held_open(&dir.join(name))) {
+            remove_node_files(config, &node_id).map_err(|cause| TransportError::Io {
+                what: format!("removing {}", dir.display()),
+                cause,
+            })?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// Removes a dead node's directory and then its monitor files, all named by its id; an
+/// interrupted removal leaves the monitor, so the next clean-up finds the node again.
+fn remove_node_files(config: &Config, node_id: &str) -> std::io::Result<()> {
+    let node_dir = std_path(&config.global.node_dir());
+    let gone_already = |result: std::io::Result<()>| match result {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        other => other,
+    };
+    gone_already(std::fs::remove_dir_all(node_dir.join(node_id)))?;
+    let monitor = format!("{}{node_id}.", String::from_utf8_lossy(config.global.prefix.as_bytes()));
+    for name in names_owned_by(&node_dir, effective_uid()).map_err(std::io::Error::other)? {
+        if name.starts_with(&monitor) {
+            gone_already(std::fs::remove_file(node_dir.join(name)))?;
         }
     }
     Ok(())
+}
+
+/// Whether a process of this user has `path` open (Linux: `/proc/PID/fd`). Yes when that
+/// cannot be told, so nothing in use is removed.
+fn held_open(path: &StdPath) -> bool {
+    let (Ok(path), Ok(processes)) = (path.canonicalize(), std::fs::read_dir("/proc")) else {
+        return true;
+    };
+    processes.flatten().any(|process| {
+        std::fs::read_dir(process.path().join("fd")).is_ok_and(|fds| {
+            fds.flatten().any(|fd| std::fs::read_link(fd.path()).is_ok_and(|to| to == path))
+        })
+    })
+}
+
+fn remove_file(path: &StdPath) -> Result<(), TransportError> {
+    match std::fs::remove_file(path) {
+        // Someone else removed it first: the goal is reached.
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(TransportError::Io { what: format!("removing {}", path.display()), cause: e })
+        }
+        _ => Ok(()),
+    }
 }
 
 /// What [`sweep_stale_runs`] did.
@@ -98,14 +216,12 @@ pub struct SweepReport {
 /// fails the sweep.
 pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
     let mut runs = BTreeSet::new();
-    for dir in candidate_dirs()? {
-        for name in names_owned_by(&dir, effective_uid())? {
-            if let Some(run_id) =
-                name.strip_prefix(PREFIX_HEAD).and_then(|rest| rest.split('.').next())
-            {
-                if services::validate_run_id(run_id).is_ok() {
-                    runs.insert(run_id.to_string());
-                }
+    for path in files_of_this_user()? {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        if let Some(run_id) = name.strip_prefix(PREFIX_HEAD).and_then(|rest| rest.split('.').next())
+        {
+            if services::validate_run_id(run_id).is_ok() {
+                runs.insert(run_id.to_string());
             }
         }
     }
@@ -131,46 +247,48 @@ pub fn sweep_stale_runs() -> Result<SweepReport, TransportError> {
 pub fn leftover_files(run_id: &str) -> Result<Vec<PathBuf>, TransportError> {
     services::validate_run_id(run_id).map_err(TransportError::InvalidRunId)?;
     let prefix = run_prefix(run_id);
-    let mut found = Vec::new();
+    let mut found: Vec<PathBuf> = files_of_this_user()?
+        .into_iter()
+        .filter(|path| path.file_name().is_some_and(|n| n.to_string_lossy().starts_with(&prefix)))
+        .collect();
+    found.sort();
+    Ok(found)
+}
+
+/// This user's files in the [`candidate_dirs`] and in the node directories (named by node
+/// id) under the node directory.
+fn files_of_this_user() -> Result<Vec<PathBuf>, TransportError> {
+    let uid = effective_uid();
+    let node_dir = std_path(&super::default_config()?.global.node_dir());
+    let mut files = Vec::new();
     let mut dirs = candidate_dirs()?;
     while let Some(dir) = dirs.pop() {
-        let entries = match std::fs::read_dir(&dir) {
-            Ok(entries) => entries,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(cause) => {
-                return Err(TransportError::Io {
-                    what: format!("listing {}", dir.display()),
-                    cause,
-                })
-            }
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            // Node directories are named by node id; their files carry the prefix.
-            if path.is_dir() && dir.ends_with("nodes") {
+        for name in names_owned_by(&dir, uid)? {
+            let path = dir.join(name);
+            if dir == node_dir && path.is_dir() {
                 dirs.push(path);
-            } else if entry.file_name().to_string_lossy().starts_with(&prefix) {
-                found.push(path);
+            } else {
+                files.push(path);
             }
         }
     }
-    found.sort();
-    Ok(found)
+    Ok(files)
 }
 
 /// `/dev/shm` and this user's iceoryx2 root with its node and service directories, taken
 /// from the configuration every run's node uses, so they are the directories its files are in.
 fn candidate_dirs() -> Result<Vec<PathBuf>, TransportError> {
     let global = super::default_config()?.global;
-    let path = |p: &iceoryx2::prelude::Path| {
-        PathBuf::from(String::from_utf8_lossy(p.as_bytes()).into_owned())
-    };
     Ok(vec![
         PathBuf::from(SHM_DIR),
-        path(global.root_path()),
-        path(&global.node_dir()),
-        path(&global.service_dir()),
+        std_path(global.root_path()),
+        std_path(&global.node_dir()),
+        std_path(&global.service_dir()),
     ])
+}
+
+fn std_path(path: &iceoryx2::prelude::Path) -> PathBuf {
+    PathBuf::from(String::from_utf8_lossy(path.as_bytes()).into_owned())
 }
 
 /// Names of the entries of `dir` that belong to `uid` (this user, but for tests). `/dev/shm`
