@@ -601,6 +601,68 @@ fn an_empty_segment_of_a_killed_process_does_not_hang_the_clean_up() {
     assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
 }
 
+/// A listener killed after it made its segment and socket but before iceoryx2 recorded its
+/// port (1 of about 250 agents killed 0 to 40 ms after they started) leaves both, named by
+/// nothing but the run's prefix. Once no node of the run is left they are removed; a
+/// listener of a run of the same id starting meanwhile, whose segment is mapped and whose
+/// socket is bound, keeps both. Made here by hand, as iceoryx2 lays them out.
+#[test]
+fn the_files_of_a_listener_killed_before_its_port_was_recorded_are_swept() {
+    let _sweeps = dead_nodes_lock();
+    let config = run("deadlistener");
+    let prefix = format!("flockstep.{}.", config.run_id);
+    let listener = |id: &str| {
+        let segment = std::path::PathBuf::from(format!("/dev/shm/{prefix}{id}.event_mgmt"));
+        std::fs::write(&segment, [7u8; 64]).unwrap();
+        let socket = iceoryx_root().join(format!("{prefix}{id}.event"));
+        (segment, std::os::unix::net::UnixDatagram::bind(&socket).unwrap(), socket)
+    };
+    let (killed_segment, killed_socket, killed_socket_path) = listener("1111");
+    drop(killed_socket);
+    let (live_segment, live_socket, live_socket_path) = listener("2222");
+    let mapping = Mapping::of(&live_segment);
+
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!((cleaned.live_nodes, cleaned.files), (0, 2), "{cleaned:?}");
+    assert!(!killed_segment.exists() && !killed_socket_path.exists(), "the killed listener's");
+    assert!(live_segment.exists() && live_socket_path.exists(), "a live listener's were removed");
+    drop((mapping, live_socket));
+    cleanup_run(&config.run_id).unwrap();
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+}
+
+/// A file mapped into this process, as a listener maps its segment, with no descriptor left
+/// open; unmapped when dropped.
+struct Mapping(*mut libc::c_void);
+
+impl Mapping {
+    fn of(path: &std::path::Path) -> Mapping {
+        use std::os::fd::AsRawFd;
+        let file = std::fs::OpenOptions::new().read(true).write(true).open(path).unwrap();
+        // SAFETY: a fresh shared mapping of a 64-byte file this test made; nothing reads it.
+        let at = unsafe {
+            libc::mmap(
+                std::ptr::null_mut(),
+                64,
+                libc::PROT_READ,
+                libc::MAP_SHARED,
+                file.as_raw_fd(),
+                0,
+            )
+        };
+        assert_ne!(at, libc::MAP_FAILED, "mapping {}", path.display());
+        Mapping(at)
+    }
+}
+
+impl Drop for Mapping {
+    fn drop(&mut self) {
+        // SAFETY: the mapping made in `of`, unmapped once.
+        unsafe { libc::munmap(self.0, 64) };
+    }
+}
+
 /// Removes a directory when dropped, so a failing test leaves nothing in /dev/shm.
 struct RemoveDir(std::path::PathBuf);
 

@@ -4,12 +4,12 @@
 
 use crate::harness::{
     agent_pids, assert_nothing_left, assert_same_file, catches, comm_entry, episode_rows,
-    first_gap, mean_length, notes, pids_with, read, read_trace, run_id, scratch, signal, summary,
-    supervise, wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
+    first_gap, mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
+    wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
 use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
-use flockstep_proto::transport::{leftover_files, RunConfig, RunServices, SignalMode};
+use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
 use flockstep_supervisor::interrupt::HURRY_AFTER;
 use std::time::{Duration, Instant};
@@ -178,10 +178,8 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
 /// An agent killed as it starts, while iceoryx2 creates its node, ports and services, can
 /// leave files iceoryx2 never removes, and one kind made the world, or the next run's
 /// start-up sweep, wait for good (an empty segment: 4 of about 1 000 such runs hung). Every
-/// run completes, and what is left is only the one kind still known to stay: the listener
-/// files of a port killed before iceoryx2 recorded it (seen in 1 of about 250 such runs),
-/// which the test removes itself. Before `cleanup_run` removed the rest, 6 of 80 runs left
-/// files.
+/// run completes and leaves nothing. Before `cleanup_run` removed those files, 6 of 80 runs
+/// left some.
 #[test]
 fn agents_killed_as_they_start_never_hang_the_run() {
     for attempt in 0..40 {
@@ -202,18 +200,7 @@ fn agents_killed_as_they_start_never_hang_the_run() {
         }
         let (status, report) = run.finish(DEADLOCK);
         assert!(status.status.success(), "attempt {attempt}\n{report}");
-        wait_until(&format!("the processes of run {id} to exit"), DEADLOCK, || {
-            pids_with(&id).is_empty()
-        });
-        let left = leftover_files(&id).expect("list the run's files");
-        let listener = |path: &std::path::PathBuf| {
-            let name = path.to_string_lossy();
-            name.ends_with(".event") || name.ends_with(".event_mgmt")
-        };
-        assert!(left.iter().all(listener), "attempt {attempt}: left {left:#?}");
-        for path in left {
-            std::fs::remove_file(&path).expect("remove a listener's leftover file");
-        }
+        assert_nothing_left(&id);
     }
 }
 

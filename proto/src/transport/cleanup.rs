@@ -66,6 +66,7 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     })
     .map_err(|e| setup(run_id, "listing the run's nodes", e))?;
     if report.live_nodes == 0 {
+        report.files += remove_unrecorded_listeners(&config, run_id)?;
         let suffix = String::from_utf8_lossy(config.global.node.global_mgmt_suffix.as_bytes());
         let prefix = run_prefix(run_id);
         for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
@@ -91,10 +92,42 @@ pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportErro
     for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
         let path = StdPath::new(SHM_DIR).join(&name);
         let empty = std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == 0);
-        if name.starts_with(&prefix) && empty && !held_open(&path) {
+        if name.starts_with(&prefix) && empty && !in_use(&path) {
             remove_file(&path)?;
             removed += 1;
         }
+    }
+    Ok(removed)
+}
+
+/// Removes the files of the run's listeners that were killed before iceoryx2 recorded their
+/// port, which nothing names but the run's prefix (1 of about 250 agents killed 0 to 40 ms
+/// after they started): the listener's segment (`*.event_mgmt` in `/dev/shm`) and its socket
+/// (`*.event` under the root). A listener creates its segment before its socket and keeps it
+/// mapped for its whole life, as does every notifier that opened it, so a segment no process
+/// has open or mapped belongs to no listener, and neither does the socket of its name. Called
+/// once no node of the run is left; a run of the same id starting meanwhile keeps its
+/// listeners, whose segments it maps. Returns how many files were removed.
+fn remove_unrecorded_listeners(config: &Config, run_id: &str) -> Result<usize, TransportError> {
+    let prefix = run_prefix(run_id);
+    let socket_suffix =
+        String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
+    let segment_suffix = format!("{socket_suffix}_mgmt");
+    let socket_dir = std_path(config.global.root_path());
+    let mut removed = 0;
+    for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
+        let Some(stem) = name.strip_suffix(&segment_suffix) else { continue };
+        let segment = StdPath::new(SHM_DIR).join(&name);
+        if !stem.starts_with(&prefix) || in_use(&segment) {
+            continue;
+        }
+        let socket = socket_dir.join(format!("{stem}{socket_suffix}"));
+        if socket.exists() {
+            remove_file(&socket)?;
+            removed += 1;
+        }
+        remove_file(&segment)?;
+        removed += 1;
     }
     Ok(removed)
 }
@@ -143,7 +176,7 @@ fn remove_nodes_that_died_starting(config: &Config, prefix: &str) -> Result<usiz
         }
         let files = names_owned_by(&dir, uid)?;
         let of_this_run = !files.is_empty() && files.iter().all(|name| name.starts_with(prefix));
-        if of_this_run && !files.iter().any(|name| held_open(&dir.join(name))) {
+        if of_this_run && !files.iter().any(|name| in_use(&dir.join(name))) {
             remove_node_files(config, &node_id).map_err(|cause| TransportError::Io {
                 what: format!("removing {}", dir.display()),
                 cause,
@@ -172,16 +205,21 @@ fn remove_node_files(config: &Config, node_id: &str) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Whether a process of this user has `path` open (Linux: `/proc/PID/fd`). Yes when that
-/// cannot be told, so nothing in use is removed.
-fn held_open(path: &StdPath) -> bool {
+/// Whether a process of this user has `path` open or mapped (Linux: `/proc/PID/fd` and
+/// `/proc/PID/maps`). Yes when that cannot be told, so nothing in use is removed.
+fn in_use(path: &StdPath) -> bool {
     let (Ok(path), Ok(processes)) = (path.canonicalize(), std::fs::read_dir("/proc")) else {
         return true;
     };
+    let mapped = |maps: String| {
+        // A file's mapping ends its line with the file's path, the line's first `/`.
+        maps.lines().any(|line| line.find('/').is_some_and(|at| StdPath::new(&line[at..]) == path))
+    };
     processes.flatten().any(|process| {
-        std::fs::read_dir(process.path().join("fd")).is_ok_and(|fds| {
+        let open = std::fs::read_dir(process.path().join("fd")).is_ok_and(|fds| {
             fds.flatten().any(|fd| std::fs::read_link(fd.path()).is_ok_and(|to| to == path))
-        })
+        });
+        open || std::fs::read_to_string(process.path().join("maps")).is_ok_and(mapped)
     })
 }
 
