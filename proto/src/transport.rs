@@ -18,7 +18,9 @@ mod root;
 mod run_services;
 mod wait;
 
-pub use cleanup::{cleanup_run, leftover_files, sweep_stale_runs, RunCleanup, SweepReport};
+pub use cleanup::{
+    cleanup_run, leftover_files, process_of_node, sweep_stale_runs, RunCleanup, SweepReport,
+};
 pub use ports::{
     ActionLoan, ActionSample, AgentPorts, FromWorld, ObservationSample, Peers, SenderNode,
     SupervisorPorts, WorldPorts, EPISODE_WAKE_EVERY,

@@ -505,12 +505,7 @@ fn what_a_node_killed_while_it_created_a_port_leaves_is_swept() {
     let config = run("halfmade");
     spawn_and_kill(&config, "world");
     let prefix = format!("flockstep.{}.", config.run_id);
-    let node_dir = leftover_files(&config.run_id)
-        .unwrap()
-        .iter()
-        .filter_map(|file| file.parent().map(std::path::Path::to_path_buf))
-        .find(|dir| dir.parent() == Some(iceoryx_root().join("nodes").as_path()))
-        .expect("the killed world's node directory");
+    let node_dir = node_dir_of(&config);
     let half_made = |path: std::path::PathBuf, mode: u32| {
         std::fs::write(&path, b"").unwrap();
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
@@ -524,6 +519,106 @@ fn what_a_node_killed_while_it_created_a_port_leaves_is_swept() {
     let after = leftover_files(&config.run_id).unwrap();
     assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
     assert!(!node_dir.exists() && !tag.exists() && !event.exists(), "{node_dir:?}");
+}
+
+/// The directory of the one node of `config`'s run (its process may be dead).
+fn node_dir_of(config: &RunConfig) -> std::path::PathBuf {
+    let files = leftover_files(&config.run_id).unwrap();
+    files
+        .iter()
+        .filter_map(|file| file.parent().map(std::path::Path::to_path_buf))
+        .find(|dir| dir.parent() == Some(iceoryx_root().join("nodes").as_path()))
+        .unwrap_or_else(|| panic!("no node directory among {files:#?}"))
+}
+
+/// A dead node whose clean-up was itself killed after it removed, or emptied, the node's
+/// directory and before the node's monitor is listed without details. It is swept all the
+/// same; before, its monitor stayed for good, and every sweep counted it removed again.
+/// Made by cleaning a killed world's node and putting its monitor back.
+#[test]
+fn a_node_whose_clean_up_was_killed_halfway_is_swept() {
+    let _sweeps = dead_nodes_lock();
+    for (test, emptied) in [("cutdir", false), ("cutfiles", true)] {
+        let config = run(test);
+        spawn_and_kill(&config, "world");
+        let node_dir = node_dir_of(&config);
+        let kept = tempfile::tempdir().unwrap();
+        let mut monitor = leftover_files(&config.run_id).unwrap();
+        monitor.retain(|file| file.to_string_lossy().contains(".node_monitor"));
+        assert_eq!(monitor.len(), 3, "{test}: the monitor, its owner lock and its context");
+        for file in &monitor {
+            std::fs::copy(file, kept.path().join(file.file_name().unwrap())).unwrap();
+        }
+        assert_eq!(cleanup_run(&config.run_id).unwrap().dead_nodes, 1, "{test}");
+        for file in &monitor {
+            std::fs::copy(kept.path().join(file.file_name().unwrap()), file).unwrap();
+        }
+        if emptied {
+            std::fs::create_dir(&node_dir).unwrap();
+        }
+
+        let cleaned = cleanup_run(&config.run_id).unwrap();
+        assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{test}: {cleaned:?}");
+        let after = leftover_files(&config.run_id).unwrap();
+        assert!(after.is_empty() && !node_dir.exists(), "{test}: left {after:#?}");
+    }
+}
+
+/// A dead node that cannot be removed (here its details cannot be read, and its directory
+/// holds complete files) counts as live, so its run keeps its node-id counter segment.
+/// Before, it was counted as removed.
+#[test]
+fn a_dead_node_that_cannot_be_removed_counts_as_live() {
+    use std::os::unix::fs::PermissionsExt;
+    let _sweeps = dead_nodes_lock();
+    let config = run("unreadable");
+    spawn_and_kill(&config, "world");
+    let node_dir = node_dir_of(&config);
+    let details = std::fs::read_dir(&node_dir)
+        .unwrap()
+        .flatten()
+        .map(|entry| entry.path())
+        .find(|path| path.to_string_lossy().ends_with("node.details"))
+        .expect("the killed world's node details");
+    std::fs::set_permissions(&details, std::fs::Permissions::from_mode(0o600)).unwrap();
+    std::fs::write(&details, b"not a node's details").unwrap();
+    std::fs::set_permissions(&details, std::fs::Permissions::from_mode(0o400)).unwrap();
+
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    let left = leftover_files(&config.run_id).unwrap();
+    for file in &left {
+        std::fs::remove_file(file).unwrap();
+    }
+    std::fs::remove_dir(&node_dir).unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (0, 1), "{cleaned:?}");
+    let counter = |file: &&std::path::PathBuf| file.to_string_lossy().ends_with(".global_mgmt");
+    assert!(left.iter().any(|file| counter(&file)), "the node-id counter went: {left:#?}");
+}
+
+/// A process killed between creating its node's directory and writing the node's details
+/// into it leaves the directory empty, named by nothing but the node id (3 of 480 agents
+/// killed 0 to 40 ms after they started). The clean-up of any run removes it once the
+/// process that the id names is gone; one whose process lives (a node starting) is kept.
+#[test]
+fn an_empty_node_directory_is_removed_once_its_process_is_gone() {
+    let _sweeps = dead_nodes_lock();
+    let killed = run("emptydead");
+    spawn_and_kill(&killed, "world");
+    let dead_dir = node_dir_of(&killed);
+    cleanup_run(&killed.run_id).unwrap();
+    std::fs::create_dir(&dead_dir).unwrap();
+    let living = run("emptyalive");
+    let world = RunServices::create(&living).unwrap();
+    let own_id: u128 = node_dir_of(&living).file_name().unwrap().to_str().unwrap().parse().unwrap();
+    // The same process and counter, a second later: as iceoryx2 would name it.
+    let live_dir = iceoryx_root().join("nodes").join((own_id + 1).to_string());
+    std::fs::create_dir(&live_dir).unwrap();
+    let _remove = RemoveDir(live_dir.clone());
+
+    let cleaned = cleanup_run(&killed.run_id).unwrap();
+    assert!(!dead_dir.exists(), "the killed process's directory was kept: {cleaned:?}");
+    assert!(live_dir.exists(), "the directory of a living process was removed");
+    drop(world);
 }
 
 /// An agent killed between writing its node's details and completing the node's monitor (2

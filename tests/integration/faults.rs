@@ -9,7 +9,9 @@ use crate::harness::{
 };
 use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
-use flockstep_proto::transport::{RunConfig, RunServices, SignalMode};
+use flockstep_proto::transport::{
+    iceoryx_root, process_of_node, RunConfig, RunServices, SignalMode,
+};
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
 use flockstep_supervisor::interrupt::HURRY_AFTER;
 use std::time::{Duration, Instant};
@@ -195,12 +197,24 @@ fn agents_killed_as_they_start_never_hang_the_run() {
             !agent_pids(&id, 2).is_empty() || run.has_exited()
         });
         std::thread::sleep(Duration::from_millis(attempt));
-        for pid in agent_pids(&id, 2) {
+        let killed = agent_pids(&id, 2);
+        for &pid in &killed {
             signal(pid, libc::SIGKILL);
         }
         let (status, report) = run.finish(DEADLOCK);
         assert!(status.status.success(), "attempt {attempt}\n{report}");
         assert_nothing_left(&id);
+        // Nothing names the run in an empty node directory, but its id names the process.
+        let nodes = std::fs::read_dir(iceoryx_root().join("nodes")).expect("the node directory");
+        let of_killed: Vec<_> = nodes
+            .flatten()
+            .filter(|node| {
+                let node_id = node.file_name().to_string_lossy().parse::<u128>();
+                node_id.is_ok_and(|node_id| killed.contains(&process_of_node(node_id)))
+            })
+            .map(|node| node.path())
+            .collect();
+        assert!(of_killed.is_empty(), "attempt {attempt}: UAV2 left {of_killed:?}");
     }
 }
 

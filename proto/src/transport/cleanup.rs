@@ -25,35 +25,37 @@ pub struct RunCleanup {
     /// keeps its node-id counter segment.
     pub live_nodes: usize,
     /// Files of the run removed besides the nodes' own: empty segments and, once no node was
-    /// left, the node-id counter segment.
+    /// left, the node-id counter segment and the files of unrecorded listeners.
     pub files: usize,
+    /// Empty node directories of processes that died as they created them, of any run of
+    /// this user (see [`remove_abandoned_node_dirs`]).
+    pub abandoned_node_dirs: usize,
 }
 
 /// Removes what a run left behind: the resources of its dead nodes, what iceoryx2 never
 /// removes of a process killed as it created a file (see [`remove_empty_segments`],
-/// [`remove_nodes_that_died_starting`], [`remove_node_without_details`]) and, once no node
-/// of the run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that
-/// iceoryx2 keeps in `/dev/shm` for the life of the machine (only this user's: see
-/// [`names_owned_by`]).
+/// [`remove_nodes_that_died_starting`], [`remove_node_without_details`],
+/// [`remove_abandoned_node_dirs`], [`remove_unrecorded_listeners`]) and, once no node of the
+/// run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that iceoryx2 keeps
+/// in `/dev/shm` for the life of the machine (only this user's: see [`names_owned_by`]).
 pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     let config = super::iceoryx_config(run_id)?;
     let mut report = RunCleanup {
         files: remove_empty_segments(run_id)?,
         dead_nodes: remove_nodes_that_died_starting(&config, &run_prefix(run_id))?,
         live_nodes: 0,
+        abandoned_node_dirs: remove_abandoned_node_dirs(&config)?,
     };
     Node::<Ipc>::list(&config, |state| {
         match state {
             NodeState::Dead(dead) => {
                 // Waits briefly if another process is cleaning the same node. A node that
-                // cannot be removed (permissions) still holds the run's files.
+                // cannot be removed (permissions), or that another process is removing,
+                // still holds the run's files.
                 let node_id = dead.id().value();
-                let removed = if dead.details().is_none() {
-                    remove_node_without_details(&config, node_id).is_ok()
-                } else {
-                    dead.blocking_remove_stale_resources(Duration::from_millis(100)).is_ok()
-                        || remove_node_without_details(&config, node_id).is_ok_and(|done| done)
-                };
+                let removed = (dead.details().is_some()
+                    && dead.blocking_remove_stale_resources(Duration::from_millis(100)).is_ok())
+                    || remove_node_without_details(&config, node_id).is_ok_and(|done| done);
                 if removed {
                     report.dead_nodes += 1;
                 } else {
@@ -137,22 +139,62 @@ fn remove_unrecorded_listeners(config: &Config, run_id: &str) -> Result<usize, T
 /// them looks under the default one. Such a node is one killed while it created a port or
 /// service tag, whose clean-up then removed its details and failed: iceoryx2 does not list a
 /// half-made tag (one still writable), so it is not removed and the node's directory
-/// cannot be (5 of 60 agents killed 0 to 40 ms after they started left one). Its directory
-/// holds only half-made files then; one that holds any other is not such a node, and an
-/// empty or missing one is a node another process's clean-up is finishing. Returns whether
-/// it removed the node.
+/// cannot be (5 of 60 agents killed 0 to 40 ms after they started left one). Or one whose
+/// clean-up was killed after it emptied or removed the directory, before the monitor. Its
+/// directory holds only half-made files then, or nothing, or is gone; one that holds any
+/// other is not such a node. While another process removes the node it holds the monitor's
+/// lock open, and the node is left to it. Returns whether it removed the node.
 fn remove_node_without_details(config: &Config, node_id: u128) -> std::io::Result<bool> {
     let node_id = node_id.to_string();
-    let dir = std_path(&config.global.node_dir()).join(&node_id);
-    let Ok(entries) = std::fs::read_dir(&dir) else { return Ok(false) };
-    let modes: Vec<u32> =
-        entries.flatten().filter_map(|e| e.metadata().ok()).map(|m| m.mode()).collect();
+    let node_dir = std_path(&config.global.node_dir());
+    let modes: Vec<u32> = match std::fs::read_dir(node_dir.join(&node_id)) {
+        Ok(entries) => {
+            entries.flatten().filter_map(|e| e.metadata().ok()).map(|m| m.mode()).collect()
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e),
+    };
     // Made read-only once complete, as every iceoryx2 file in a node's directory.
-    if modes.is_empty() || modes.iter().any(|mode| mode & 0o200 == 0) {
+    let complete = modes.iter().any(|mode| mode & 0o200 == 0);
+    let monitor = monitor_files(config, &node_id).map_err(std::io::Error::other)?;
+    if complete || monitor.iter().any(|name| in_use(&node_dir.join(name))) {
         return Ok(false);
     }
     remove_node_files(config, &node_id)?;
     Ok(true)
+}
+
+/// Removes the node directories that a process killed between creating one and writing its
+/// node's details into it left empty, which nothing lists or names but the node id. A
+/// node's id carries the id of the process that made it (iceoryx2 0.10 `UniqueSystemId`:
+/// seconds, nanoseconds, process id and counter, 32 bits each from the lowest), so such a
+/// directory is the one empty directory whose process is gone; a node still starting keeps
+/// its process. The run it belonged to cannot be told, so the clean-up of any run removes
+/// any of this user's. Returns how many were removed.
+fn remove_abandoned_node_dirs(config: &Config) -> Result<usize, TransportError> {
+    let node_dir = std_path(&config.global.node_dir());
+    let mut removed = 0;
+    for node_id in names_owned_by(&node_dir, effective_uid())? {
+        let dir = node_dir.join(&node_id);
+        let empty = std::fs::read_dir(&dir).is_ok_and(|mut entries| entries.next().is_none());
+        let gone = node_id.parse().is_ok_and(|id| !process_exists(process_of_node(id)));
+        // Fails, and is left, if the directory is no longer empty.
+        if empty && gone && std::fs::remove_dir(&dir).is_ok() {
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// The id of the process that created the node `node_id`, the name of its directory (see
+/// [`remove_abandoned_node_dirs`]).
+pub fn process_of_node(node_id: u128) -> u32 {
+    (node_id >> 64) as u32
+}
+
+/// Whether a process of that id exists, or cannot be told not to (a zombie exists).
+fn process_exists(pid: u32) -> bool {
+    !matches!(std::fs::metadata(format!("/proc/{pid}")), Err(e) if e.kind() == std::io::ErrorKind::NotFound)
 }
 
 /// Removes the directories and monitors of the run's nodes whose process died as the node
@@ -196,17 +238,27 @@ fn remove_node_files(config: &Config, node_id: &str) -> std::io::Result<()> {
         other => other,
     };
     gone_already(std::fs::remove_dir_all(node_dir.join(node_id)))?;
-    let monitor = format!("{}{node_id}.", String::from_utf8_lossy(config.global.prefix.as_bytes()));
-    for name in names_owned_by(&node_dir, effective_uid()).map_err(std::io::Error::other)? {
-        if name.starts_with(&monitor) {
-            gone_already(std::fs::remove_file(node_dir.join(name)))?;
-        }
+    for name in monitor_files(config, node_id).map_err(std::io::Error::other)? {
+        gone_already(std::fs::remove_file(node_dir.join(name)))?;
     }
     Ok(())
 }
 
-/// Whether a process of this user has `path` open or mapped (Linux: `/proc/PID/fd` and
-/// `/proc/PID/maps`). Yes when that cannot be told, so nothing in use is removed.
+/// The names of the node's monitor files in the node directory: the monitor, its owner
+/// lock and its context.
+fn monitor_files(config: &Config, node_id: &str) -> Result<Vec<String>, TransportError> {
+    let monitor = format!("{}{node_id}.", String::from_utf8_lossy(config.global.prefix.as_bytes()));
+    let node_dir = std_path(&config.global.node_dir());
+    let mut names = names_owned_by(&node_dir, effective_uid())?;
+    names.retain(|name| name.starts_with(&monitor));
+    Ok(names)
+}
+
+/// Whether a process has `path` open or mapped (Linux: `/proc/PID/fd` and `/proc/PID/maps`).
+/// Yes if `/proc` cannot be listed, so nothing is removed blindly. A process that cannot be
+/// looked into counts as not using it: here PID 1 cannot be, even by root, and flockstep's
+/// own processes always can. Processes that share these directories from another pid
+/// namespace cannot be seen at all.
 fn in_use(path: &StdPath) -> bool {
     let (Ok(path), Ok(processes)) = (path.canonicalize(), std::fs::read_dir("/proc")) else {
         return true;
