@@ -154,7 +154,7 @@ impl Waiter {
         let start = Instant::now();
         self.check_termination(what)?;
         if self.block_until.get().is_some_and(|until| start < until) {
-            return self.block(what, timeout, start, poll);
+            return self.block(what, timeout, start, Duration::ZERO, poll);
         }
         for _ in 0..self.policy.spins {
             if let Some(found) = poll()? {
@@ -180,7 +180,7 @@ impl Waiter {
             }
             std::thread::yield_now();
         }
-        self.block(what, timeout, start, poll)
+        self.block(what, timeout, start, yield_until, poll)
     }
 
     /// Counts the wait begun at `start` as stalled if its `yielding` was, and backs off from
@@ -203,24 +203,27 @@ impl Waiter {
 
     /// The blocking phase of [`Self::wait`]: polls, then blocks on the listener in slices,
     /// until `poll` has something or `timeout` (from `start`, less the time the process was
-    /// paused, see [`PAUSE_GAP`]) passes.
+    /// paused, see [`PAUSE_GAP`]) passes. Before it, the wait yielded for up to `yielded`.
     fn block<T>(
         &self,
         what: &dyn Display,
         timeout: Duration,
         start: Instant,
+        yielded: Duration,
         mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
     ) -> Result<T, TransportError> {
         let mut last_look = start;
+        // What the time since the last look was spent on: the yielding before the first,
+        // then at most one slice slept.
+        let mut spent = yielded;
         let mut paused = Duration::ZERO;
         loop {
             if let Some(found) = poll()? {
                 return Ok(found);
             }
             let now = Instant::now();
-            // At most one slice was slept since the last look (none before the first).
-            paused += (now - last_look).saturating_sub(self.policy.slice + PAUSE_GAP);
-            last_look = now;
+            paused += (now - last_look).saturating_sub(spent + PAUSE_GAP);
+            (last_look, spent) = (now, self.policy.slice);
             let waited = (now - start).saturating_sub(paused);
             if waited >= timeout {
                 return Err(TransportError::Timeout {
@@ -337,6 +340,23 @@ mod tests {
             }
             other => panic!("nothing to find ends in a timeout: {other:?}"),
         }
+    }
+
+    /// The yielding before the block is the wait's own time, not a pause: a wait that yields
+    /// for most of its timeout still ends at its deadline. Before, all of that yielding
+    /// beyond one slice and [`PAUSE_GAP`] went uncounted, and the wait went on about as long
+    /// again.
+    #[test]
+    fn a_wait_that_yields_for_most_of_its_timeout_ends_at_its_deadline() {
+        let yield_for = Duration::from_secs(1);
+        let policy = WaitPolicy { yield_for, ..WaitPolicy::BLOCK };
+        let ports = world_waiting_with("long-yield", policy);
+        let start = Instant::now();
+        let waited = ports.waiter().wait(&"nothing", yield_for + PAUSE_GAP, || Ok(None::<()>));
+        assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{waited:?}");
+        // Ending about 1.1 s in; it went on to about 2 s.
+        let took = start.elapsed();
+        assert!(took < yield_for + PAUSE_GAP * 5, "a 1.1 s wait took {took:?}");
     }
 
     /// A process stopped in the middle of a wait (here: a poll that takes as long, as the
