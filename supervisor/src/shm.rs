@@ -413,7 +413,9 @@ impl Fleet<'_> {
              stop round, each at its next wait"
                 .to_string(),
         );
-        let left_as_asked = world.code() == Some(EXIT_TERMINATED.into())
+        // Or it finished the run just as it was told to leave.
+        let left_as_asked = world.success()
+            || world.code() == Some(EXIT_TERMINATED.into())
             || matches!(world.signal(), Some(libc::SIGTERM | libc::SIGKILL));
         if !left_as_asked {
             recorder

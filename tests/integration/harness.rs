@@ -321,12 +321,12 @@ impl Spawned {
         self.child.wait().expect("wait on the killed process")
     }
 
-    /// Polls every 10 ms for the exit, at most `timeout`.
     /// Whether the process has exited (its status is kept for [`Self::finish`]).
     pub fn has_exited(&mut self) -> bool {
         self.child.try_wait().expect("wait on the process").is_some()
     }
 
+    /// Polls every 10 ms for the exit, at most `timeout`.
     fn exited_within(&mut self, timeout: Duration) -> Option<ExitStatus> {
         let start = Instant::now();
         loop {
