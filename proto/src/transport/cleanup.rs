@@ -105,10 +105,12 @@ pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportErro
 /// Removes the files of the run's listeners that were killed before iceoryx2 recorded their
 /// port, which nothing names but the run's prefix (1 of about 250 agents killed 0 to 40 ms
 /// after they started): the listener's segment (`*.event_mgmt` in `/dev/shm`) and its socket
-/// (`*.event` under the root). A listener creates its segment before its socket and keeps it
-/// mapped for its whole life, as does every notifier that opened it, so a segment no process
-/// has open or mapped belongs to no listener, and neither does the socket of its name. Called
-/// once no node of the run is left; a run of the same id starting meanwhile keeps its
+/// (`*.event` under the root). A listener creates its segment, then its socket, and keeps
+/// the segment mapped for its whole life, as does every notifier that opened it; dropped, it
+/// removes the segment, then the socket. So a segment no process has open or mapped belongs
+/// to no listener, and neither does the socket of its name, nor a socket without a segment
+/// (seen once in about 400 such runs; a listener killed as it was dropped leaves one).
+/// Called once no node of the run is left; a run of the same id starting meanwhile keeps its
 /// listeners, whose segments it maps. Returns how many files were removed.
 fn remove_unrecorded_listeners(config: &Config, run_id: &str) -> Result<usize, TransportError> {
     let prefix = run_prefix(run_id);
@@ -116,20 +118,26 @@ fn remove_unrecorded_listeners(config: &Config, run_id: &str) -> Result<usize, T
         String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
     let segment_suffix = format!("{socket_suffix}_mgmt");
     let socket_dir = std_path(config.global.root_path());
+    let uid = effective_uid();
+    let mut listeners = BTreeSet::new();
+    for name in names_owned_by(StdPath::new(SHM_DIR), uid)? {
+        listeners.extend(name.strip_suffix(&segment_suffix).map(str::to_string));
+    }
+    for name in names_owned_by(&socket_dir, uid)? {
+        listeners.extend(name.strip_suffix(&*socket_suffix).map(str::to_string));
+    }
     let mut removed = 0;
-    for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
-        let Some(stem) = name.strip_suffix(&segment_suffix) else { continue };
-        let segment = StdPath::new(SHM_DIR).join(&name);
-        if !stem.starts_with(&prefix) || in_use(&segment) {
+    for stem in listeners.iter().filter(|stem| stem.starts_with(&prefix)) {
+        let segment = StdPath::new(SHM_DIR).join(format!("{stem}{segment_suffix}"));
+        if segment.exists() && in_use(&segment) {
             continue;
         }
-        let socket = socket_dir.join(format!("{stem}{socket_suffix}"));
-        if socket.exists() {
-            remove_file(&socket)?;
-            removed += 1;
+        for file in [socket_dir.join(format!("{stem}{socket_suffix}")), segment] {
+            if file.exists() {
+                remove_file(&file)?;
+                removed += 1;
+            }
         }
-        remove_file(&segment)?;
-        removed += 1;
     }
     Ok(removed)
 }
