@@ -25,7 +25,7 @@ pub struct RunCleanup {
     /// keeps its node-id counter segment.
     pub live_nodes: usize,
     /// Files of the run removed besides the nodes' own: empty segments and, once no node was
-    /// left, the node-id counter segment and the files of unrecorded listeners.
+    /// left, every segment and socket no process used (the node-id counter among them).
     pub files: usize,
     /// Empty node directories of processes that died as they created them, of any run of
     /// this user (see [`remove_abandoned_node_dirs`]).
@@ -35,9 +35,10 @@ pub struct RunCleanup {
 /// Removes what a run left behind: the resources of its dead nodes, what iceoryx2 never
 /// removes of a process killed as it created a file (see [`remove_empty_segments`],
 /// [`remove_nodes_that_died_starting`], [`remove_node_without_details`],
-/// [`remove_abandoned_node_dirs`], [`remove_unrecorded_listeners`]) and, once no node of the
-/// run is left, the per-prefix node-id counter segment (`*.global_mgmt`) that iceoryx2 keeps
-/// in `/dev/shm` for the life of the machine (only this user's: see [`names_owned_by`]).
+/// [`remove_abandoned_node_dirs`]) and, once no node of the run is left, every file of the
+/// run no process uses ([`remove_unused_files`]), among them the per-prefix node-id counter
+/// segment (`*.global_mgmt`) that iceoryx2 keeps in `/dev/shm` for the life of the machine
+/// (only this user's: see [`names_owned_by`]).
 pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     let config = super::iceoryx_config(run_id)?;
     let mut report = RunCleanup {
@@ -68,15 +69,7 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     })
     .map_err(|e| setup(run_id, "listing the run's nodes", e))?;
     if report.live_nodes == 0 {
-        report.files += remove_unrecorded_listeners(&config, run_id)?;
-        let suffix = String::from_utf8_lossy(config.global.node.global_mgmt_suffix.as_bytes());
-        let prefix = run_prefix(run_id);
-        for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
-            if name.starts_with(&prefix) && name.ends_with(&*suffix) {
-                remove_file(&StdPath::new(SHM_DIR).join(name))?;
-                report.files += 1;
-            }
-        }
+        report.files += remove_unused_files(&config, run_id)?;
     }
     Ok(report)
 }
@@ -102,41 +95,40 @@ pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportErro
     Ok(removed)
 }
 
-/// Removes the files of the run's listeners that were killed before iceoryx2 recorded their
-/// port, which nothing names but the run's prefix (1 of about 250 agents killed 0 to 40 ms
-/// after they started): the listener's segment (`*.event_mgmt` in `/dev/shm`) and its socket
-/// (`*.event` under the root). A listener creates its segment, then its socket, and keeps
-/// the segment mapped for its whole life, as does every notifier that opened it; dropped, it
-/// removes the segment, then the socket. So a segment no process has open or mapped belongs
-/// to no listener, and neither does the socket of its name, nor a socket without a segment
-/// (seen once in about 400 such runs; a listener killed as it was dropped leaves one).
-/// Called once no node of the run is left; a run of the same id starting meanwhile keeps its
-/// listeners, whose segments it maps. Returns how many files were removed.
-fn remove_unrecorded_listeners(config: &Config, run_id: &str) -> Result<usize, TransportError> {
+/// Removes the run's segments that no process has open or mapped, and its listener sockets
+/// without a segment: called once no node of the run is left. Among them is the node-id
+/// counter (`*.global_mgmt`), which iceoryx2 never removes, and what a process killed as it
+/// created a port left before iceoryx2 recorded the port, named by nothing but the run's
+/// prefix: a listener's segment (`*.event_mgmt`) and socket (`*.event` under the root), 1
+/// of about 250 agents killed 0 to 40 ms after they started; a lone socket and a
+/// publisher-subscriber `*.connection` segment, 1 each in about 400 more.
+///
+/// A process holds every segment it creates open until it has mapped it, and keeps it mapped
+/// while it uses it (iceoryx2 closes the descriptor once it is mapped), so one that no
+/// process has open or mapped is no one's, even with a run of the same id starting
+/// meanwhile. A listener creates its segment, then its socket, and removes the segment,
+/// then the socket, when dropped: a socket without a segment is no one's either. Returns
+/// how many files were removed.
+fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, TransportError> {
     let prefix = run_prefix(run_id);
+    let uid = effective_uid();
+    let mut removed = 0;
+    for name in names_owned_by(StdPath::new(SHM_DIR), uid)? {
+        let segment = StdPath::new(SHM_DIR).join(&name);
+        if name.starts_with(&prefix) && !in_use(&segment) {
+            remove_file(&segment)?;
+            removed += 1;
+        }
+    }
     let socket_suffix =
         String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
-    let segment_suffix = format!("{socket_suffix}_mgmt");
     let socket_dir = std_path(config.global.root_path());
-    let uid = effective_uid();
-    let mut listeners = BTreeSet::new();
-    for name in names_owned_by(StdPath::new(SHM_DIR), uid)? {
-        listeners.extend(name.strip_suffix(&segment_suffix).map(str::to_string));
-    }
     for name in names_owned_by(&socket_dir, uid)? {
-        listeners.extend(name.strip_suffix(&*socket_suffix).map(str::to_string));
-    }
-    let mut removed = 0;
-    for stem in listeners.iter().filter(|stem| stem.starts_with(&prefix)) {
-        let segment = StdPath::new(SHM_DIR).join(format!("{stem}{segment_suffix}"));
-        if segment.exists() && in_use(&segment) {
-            continue;
-        }
-        for file in [socket_dir.join(format!("{stem}{socket_suffix}")), segment] {
-            if file.exists() {
-                remove_file(&file)?;
-                removed += 1;
-            }
+        let Some(stem) = name.strip_suffix(&*socket_suffix) else { continue };
+        let segment = StdPath::new(SHM_DIR).join(format!("{stem}{socket_suffix}_mgmt"));
+        if stem.starts_with(&prefix) && !segment.exists() {
+            remove_file(&socket_dir.join(&name))?;
+            removed += 1;
         }
     }
     Ok(removed)
