@@ -114,10 +114,13 @@ impl Process {
     /// The shutdown ladder for this one process, a step at a time so that the caller goes on
     /// with its work meanwhile: SIGTERM at the first call, SIGKILL at a call once
     /// [`TERM_GRACE`] has passed since. The caller calls again until the process has exited.
+    /// The SIGTERM comes with a SIGCONT: a process stopped by someone (it looks hung) gets
+    /// to act on it, and an agent saves its Q-tables instead of being killed with them.
     pub fn bring_down(&mut self) {
         match self.terminated_at {
             None => {
                 self.signal(libc::SIGTERM);
+                self.signal(libc::SIGCONT);
                 self.terminated_at = Some(Instant::now());
             }
             Some(at) if at.elapsed() >= TERM_GRACE => self.signal(libc::SIGKILL),

@@ -762,6 +762,37 @@ fn a_hung_agent_is_reported_and_restarted() {
     assert_nothing_left(&id);
 }
 
+/// An agent stopped by someone (SIGSTOP: it looks hung) is dropped, and brought down with a
+/// SIGCONT beside its SIGTERM: it saves its tables as it leaves, and its restart goes on
+/// from them. Before, the SIGTERM waited behind the stop until the SIGKILL, and the restart
+/// started from empty tables, losing everything learned since the last snapshot (here, with
+/// `--snapshot-every 0`, everything).
+#[test]
+fn a_stopped_agent_saves_its_tables_before_it_is_restarted() {
+    let dir = scratch();
+    let (id, out) = (run_id("stopped"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 60000 --trials 2 --seed 97 --restart on-failure --snapshot-every 0 --eval-episodes 10"),
+    ));
+    let uav2 = wait_for_agent(&id, 2);
+    wait_until("episodes to be recorded", DEADLOCK, || {
+        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 10_000)
+    });
+    for &pid in &uav2 {
+        signal(pid, libc::SIGSTOP);
+    }
+    let (status, report) = run.finish(DEADLOCK);
+    assert!(status.status.success(), "{report}");
+    let s = summary(dir.path());
+    let notes = notes(&s);
+    let restart = notes.iter().find(|note| note.starts_with("UAV2 restarted"));
+    let restart = restart.unwrap_or_else(|| panic!("UAV2 was not restarted: {notes:?}"));
+    assert_eq!(*restart, "UAV2 restarted from its latest snapshot", "{notes:?}");
+    assert_nothing_left(&id);
+}
+
 /// A known limit (docs/MEMBERSHIP.md): no episode record may be lost, so a process that
 /// subscribes to them and never reads stalls the world. The run must then fail in bounded
 /// time with the service named, keep what was collected, and leave nothing behind.
