@@ -12,6 +12,7 @@
 
 use crate::agent::{AgentSpec, UavAgent};
 use crate::bt::render::to_text;
+use crate::bt::spec::TreeSpec;
 use crate::comm::CommMode;
 use crate::learning::LearnParams;
 use crate::snapshot::{restore_snapshots, write_snapshot, write_snapshots, Learned};
@@ -254,6 +255,13 @@ fn serve(
     out: &Path,
 ) -> Result<()> {
     let faults = learner.fault.as_deref().map_or(Ok(Vec::new()), parse_faults)?;
+    // Its own inputs are checked before it looks for the run: a mistake must not take a
+    // route, even for a moment. A directory without a trial's snapshot is normal (a restart
+    // before the first one); a directory that is not there is a mistake, not a fresh start.
+    let tree = load_uav_tree(learner.bt.as_deref())?;
+    if let Some(dir) = learner.resume.as_deref().filter(|dir| !dir.is_dir()) {
+        bail!("--resume {}: no such directory", dir.display());
+    }
     let world_timeout = Duration::from_millis(learner.world_timeout_ms);
     let ports = open_ports(run, world_timeout, setup.is_none())?;
     if faults.contains(&Fault::IgnoreSigterm) {
@@ -274,21 +282,13 @@ fn serve(
             )?;
         }
     }
-    if let Some(dir) = &learner.resume {
-        // A directory without a trial's snapshot is normal (a restart before the first
-        // one); a directory that is not there is a mistake, not a fresh start. Checked
-        // before joining: the mistake must not take a route, even for a moment.
-        if !dir.is_dir() {
-            bail!("--resume {}: no such directory", dir.display());
-        }
-    }
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
     let setup = match setup {
         Some(setup) => setup,
         None => read_run_info(&ports, world_timeout)?,
     };
-    let mut session = Session::new(slot, &setup, learner, out)?;
+    let mut session = Session::new(slot, &setup, tree, learner, out)?;
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
     let flown = fly(&ports, &mut session, first, nonce, &faults, world_timeout, trace.as_mut());
@@ -492,14 +492,19 @@ struct Session {
 }
 
 impl Session {
-    fn new(slot: usize, setup: &Setup, learner: &LearnerArgs, out: &Path) -> Result<Session> {
+    fn new(
+        slot: usize,
+        setup: &Setup,
+        tree: TreeSpec,
+        learner: &LearnerArgs,
+        out: &Path,
+    ) -> Result<Session> {
         let scenario = Arc::new(
             Scenario::resolve(&setup.scenario).map_err(|e| anyhow::anyhow!("scenario: {e}"))?,
         );
         let comm = CommMode::parse(&setup.comm).with_context(|| {
             format!("communication mode `{}`: expected none, flags or compact", setup.comm)
         })?;
-        let tree = load_uav_tree(learner.bt.as_deref())?;
         let tree_text = to_text(&tree);
         let base = setup.params.unwrap_or_default();
         let params = LearnParams {

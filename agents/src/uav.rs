@@ -40,8 +40,9 @@ impl LeafCatalog for UavCatalog {
     }
 }
 
-/// Reads (at most [`flockstep_world::map::MAX_INPUT_BYTES`]) and parses a UAV tree file, or
-/// the built-in Fig. 5 tree when `path` is None.
+/// Reads (at most [`flockstep_world::map::MAX_INPUT_BYTES`]), parses and checks against the
+/// engine's limits ([`crate::bt::tree::Tree::check`]) a UAV tree file, or the built-in Fig. 5
+/// tree when `path` is None: a process refuses a bad tree before it joins or starts a run.
 pub fn load_uav_tree(path: Option<&std::path::Path>) -> anyhow::Result<crate::bt::spec::TreeSpec> {
     use anyhow::Context;
     let (source, text) = match path {
@@ -52,7 +53,9 @@ pub fn load_uav_tree(path: Option<&std::path::Path>) -> anyhow::Result<crate::bt
                 .with_context(|| format!("cannot read tree file {}", path.display()))?,
         ),
     };
-    Ok(crate::bt::parse::parse_tree(&source, &text, &UavCatalog)?)
+    let spec = crate::bt::parse::parse_tree(&source, &text, &UavCatalog)?;
+    crate::bt::tree::Tree::check(&spec)?;
+    Ok(spec)
 }
 
 /// The UAV's body during one tick: its pose, what its camera sees, and the commands and

@@ -6,7 +6,6 @@ use anyhow::{bail, Context, Result};
 use flockstep_agents::agent::{AgentSpec, UavAgent};
 use flockstep_agents::bt::render::to_text;
 use flockstep_agents::bt::spec::TreeSpec;
-use flockstep_agents::bt::tree::Tree;
 use flockstep_agents::comm::CommMode;
 use flockstep_agents::learning::LearnParams;
 use flockstep_agents::snapshot::Learned;
@@ -104,8 +103,6 @@ impl RunConfig {
             None => default_comm(args.uavs),
         };
         let tree = load_uav_tree(args.bt.as_deref())?;
-        // Every agent builds the tree; a tree past the engine's limits is refused here, once.
-        Tree::check(&tree)?;
         let params = LearnParams {
             alpha: args.alpha,
             gamma: args.gamma,

@@ -88,23 +88,37 @@ fn attaching_to_a_run_that_is_not_running_waits_the_world_timeout() {
     assert_nothing_left(&id);
 }
 
-/// An attaching agent whose `--resume` names no directory exits saying so before it asks to
-/// join: before, it was admitted on the free route first and the run noted it as an agent
-/// that attached and left.
+/// An attaching agent whose `--resume` names no directory, or whose `--bt` tree is bad,
+/// exits saying so before it asks to join, and before it waits for a run that is not there:
+/// before, it was admitted on the free route first and the run noted it as an agent that
+/// attached and left (or, with no run, it said only that the run was not running, after
+/// `--world-timeout-ms`).
 #[test]
-fn an_agent_with_a_missing_resume_directory_exits_before_it_joins() {
+fn an_agent_with_bad_inputs_of_its_own_exits_before_it_joins() {
     let dir = scratch();
-    let (id, out) = (run_id("resume-missing"), dir.path().display().to_string());
+    let (id, out) = (run_id("bad-inputs"), dir.path().display().to_string());
     // s4 has three routes: the third is free for an attaching agent.
     let run = run_until_stopped(&id, &out, "s4");
     wait_for_agent(&id, 2);
-    let missing = dir.path().join("no-such-run");
-    let args = ["--attach", &id, "--out", &out, "--resume", &missing.display().to_string()];
-    let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
-    assert!(!output.status.success(), "expected a refusal\n{report}");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let expected = format!("agent: error: --resume {}: no such directory", missing.display());
-    assert_eq!(stderr.trim(), expected, "\n{report}");
+    let missing = dir.path().join("no-such-run").display().to_string();
+    let tree = dir.path().join("bad.bt");
+    std::fs::write(&tree, "not a tree(").unwrap();
+    let tree = tree.display().to_string();
+    let absent = run_id("bad-inputs-absent");
+    for (run_id, flag, value, error) in [
+        (&id, "--resume", &missing, format!("--resume {missing}: no such directory")),
+        (&id, "--bt", &tree, tree.clone()),
+        (&absent, "--bt", &tree, tree.clone()),
+    ] {
+        let args = ["--attach", run_id, "--out", &out, flag, value, "--world-timeout-ms", "60000"];
+        // Well within the minute it would wait for a run that is not there.
+        let (output, report) = Spawned::start(AGENT, &args).finish(Duration::from_secs(30));
+        assert!(!output.status.success(), "expected a refusal\n{report}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let stderr = stderr.trim();
+        assert!(stderr.starts_with("agent: error: ") && stderr.contains(&error), "{report}");
+        assert_eq!(stderr.lines().count(), 1, "{report}");
+    }
     run.interrupt();
     let (status, report) = run.finish(BOUND);
     assert_eq!(status.status.code(), Some(130), "the run ends only on Ctrl-C\n{report}");
