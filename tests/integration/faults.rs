@@ -1050,6 +1050,37 @@ fn ctrl_z_pauses_the_whole_run_and_it_resumes_where_it_was() {
     assert_nothing_left(&id);
 }
 
+/// Ctrl-C in the first milliseconds of a run (0 to 38 ms after the supervisor can take
+/// SIGINT: as it starts the world, opens the run's services, starts the agents) stops the
+/// run: status 130, no error. A user test saw such a signal cut short iceoryx2's wait for a
+/// service the world was still creating, which failed the run with
+/// `EventOpenError::Interrupt` (3 of 9 tries, on a loaded machine); the open now retries
+/// it. This test did not reproduce that here (0 of 270 tries with the retry taken out): it
+/// guards the early stop as a whole.
+#[test]
+fn ctrl_c_as_the_run_starts_stops_it() {
+    for attempt in 0..20 {
+        let dir = scratch();
+        let (id, out) = (run_id(&format!("start-stop{attempt}")), dir.path().display().to_string());
+        let run = Spawned::supervisor(&run_args(
+            &id,
+            &out,
+            &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1"),
+        ));
+        let pid = run.pid();
+        wait_until(&format!("process {pid} to handle SIGINT"), DEADLOCK, || {
+            catches(pid, libc::SIGINT)
+        });
+        std::thread::sleep(Duration::from_millis(2 * attempt));
+        signal(pid, libc::SIGINT);
+        let (status, report) = run.finish(DEADLOCK);
+        assert_eq!(status.status.code(), Some(130), "attempt {attempt}\n{report}");
+        let stderr = String::from_utf8_lossy(&status.stderr);
+        assert!(!stderr.contains("error"), "attempt {attempt}\n{report}");
+        assert_nothing_left(&id);
+    }
+}
+
 /// Ctrl-C as soon as the agents start: the world's first round is then the stop round, which
 /// each agent answers once its tables are saved. An agent used to leave right after sending
 /// that answer, and about one such run in seven failed with the world waiting for the answer

@@ -282,11 +282,12 @@ fn service_name(run_id: &str, what: &str) -> Result<ServiceName, TransportError>
 }
 
 /// A failed create or open of either kind of service, reduced to what decides the reaction:
-/// `DoesNotExist` on open is retried (the world has not created it yet), `AlreadyExists` on
-/// create means a live run holds the run id.
+/// on open, `DoesNotExist` (the world has not created it yet) and `Interrupt` (a signal cut
+/// one of iceoryx2's waits short: a Ctrl-C as the supervisor starts must stop the run, not
+/// fail it) are retried; `AlreadyExists` on create means a live run holds the run id.
 struct ServiceFailure {
     verb: &'static str,
-    missing: bool,
+    retried: bool,
     exists: bool,
     source: Box<dyn std::error::Error + Send + Sync>,
 }
@@ -294,11 +295,11 @@ struct ServiceFailure {
 impl ServiceFailure {
     fn new(
         verb: &'static str,
-        missing: bool,
+        retried: bool,
         exists: bool,
         e: impl std::error::Error + Send + Sync + 'static,
     ) -> ServiceFailure {
-        ServiceFailure { verb, missing, exists, source: Box::new(e) }
+        ServiceFailure { verb, retried, exists, source: Box::new(e) }
     }
 
     fn into_error(self, run: &RunConfig, name: &ServiceName) -> TransportError {
@@ -315,13 +316,15 @@ impl ServiceFailure {
 
 impl From<PublishSubscribeOpenError> for ServiceFailure {
     fn from(e: PublishSubscribeOpenError) -> ServiceFailure {
-        ServiceFailure::new("opening", e == PublishSubscribeOpenError::DoesNotExist, false, e)
+        use PublishSubscribeOpenError::{DoesNotExist, Interrupt};
+        ServiceFailure::new("opening", matches!(e, DoesNotExist | Interrupt), false, e)
     }
 }
 
 impl From<EventOpenError> for ServiceFailure {
     fn from(e: EventOpenError) -> ServiceFailure {
-        ServiceFailure::new("opening", e == EventOpenError::DoesNotExist, false, e)
+        use EventOpenError::{DoesNotExist, Interrupt};
+        ServiceFailure::new("opening", matches!(e, DoesNotExist | Interrupt), false, e)
     }
 }
 
@@ -348,7 +351,7 @@ fn retry<T, E: Into<ServiceFailure>>(
             Ok(service) => return Ok(service),
             Err(e) => e.into(),
         };
-        if !failure.missing {
+        if !failure.retried {
             return Err(failure.into_error(run, name));
         }
         if Instant::now() >= deadline || termination_requested() {
