@@ -112,6 +112,10 @@ pub enum SignalMode {
     Untouched,
 }
 
+/// How long the world may wait for the supervisor to make room for an episode record, unless
+/// a test says otherwise ([`RunConfig::report_timeout`]).
+pub const REPORT_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// Identity and timing of one run, as every process of the run sees it.
 #[derive(Debug, Clone)]
 pub struct RunConfig {
@@ -131,7 +135,7 @@ impl RunConfig {
             run_id: run_id.into(),
             signals,
             open_timeout: Duration::from_secs(10),
-            report_timeout: Duration::from_secs(10),
+            report_timeout: REPORT_TIMEOUT,
             wait: WaitPolicy::default(),
         }
     }

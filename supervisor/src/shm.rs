@@ -26,10 +26,10 @@ use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     cleanup_run, sweep_stale_runs, FromWorld, RunConfig as RunIdentity, RunServices, SignalMode,
-    SupervisorPorts, TransportError,
+    SupervisorPorts, TransportError, REPORT_TIMEOUT,
 };
 use flockstep_proto::{Membership, MAX_AGENTS};
-use flockstep_world::node::EXIT_TERMINATED;
+use flockstep_world::node::{EXIT_TERMINATED, STOP_ROUND_WAIT};
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
@@ -39,6 +39,8 @@ use std::time::{Duration, Instant};
 const WORLD_START: Duration = Duration::from_secs(30);
 /// How long children may take to leave by themselves once the world is done.
 const GRACE: Duration = Duration::from_secs(10);
+/// What a world asked to stop gets beyond its own waits (see `Fleet::stop_bound`).
+const STOP_SPARE: Duration = Duration::from_secs(10);
 /// Restarts of one agent before the supervisor gives up on it.
 const MAX_RESTARTS: u32 = 5;
 
@@ -271,12 +273,16 @@ impl Fleet<'_> {
         let mut control = Control::default();
         // Named when the world fails: its "every agent is gone" says nothing of why.
         let mut first_failure: Option<String> = None;
+        // When a world asked to stop must have ended the run (see `stop_bound`).
+        let mut stop_deadline: Option<Instant> = None;
+        let mut stopped_at_once: Option<&str> = None;
         loop {
             self.record_reports(ports, recorder)?;
             recorder.redraw();
             if stop.stop_asked() && control.stop == 0 {
                 control.stop = 1;
                 ports.send_control(&control)?;
+                stop_deadline = Some(Instant::now() + self.stop_bound());
                 // The stop round waits for every agent's final tables: up to 30 s for one
                 // that hangs, so say what is going on.
                 recorder.say(
@@ -285,22 +291,36 @@ impl Fleet<'_> {
                 );
             }
             if self.ctrl_z.requested() {
-                self.pause(recorder)?;
+                let paused = self.pause(recorder)?;
+                // The stop round did not go on meanwhile.
+                stop_deadline = stop_deadline.map(|deadline| deadline + paused);
+            }
+            if stopped_at_once.is_none() {
+                stopped_at_once = if stop.hurry_asked() {
+                    Some("stopped at once by a second Ctrl-C or SIGTERM")
+                } else if stop_deadline.is_some_and(|deadline| Instant::now() >= deadline) {
+                    Some("stopped at once: the world had not ended the stop round in time")
+                } else {
+                    None
+                };
             }
             // Once the world has ended by itself, the run ends as it would have.
-            if stop.hurry_asked() && self.world.status()?.is_none() {
-                if !self.world.brought_down() {
-                    recorder.say(
-                        "stopping at once: every process is told to leave now (an agent saves \
-                         its Q-tables as it leaves)",
-                    );
+            if let Some(why) = stopped_at_once {
+                if self.world.status()?.is_none() {
+                    if !self.world.brought_down() {
+                        recorder.say(&format!(
+                            "{why}: every process is told to leave now (an agent saves its \
+                             Q-tables as it leaves)"
+                        ));
+                    }
+                    self.hurry()?;
                 }
-                self.hurry()?;
             }
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
                 if self.world.brought_down() {
-                    return self.finish_hurrying(status, recorder);
+                    let why = stopped_at_once.unwrap_or("stopped at once");
+                    return self.finish_hurrying(status, why, recorder);
                 }
                 if !status.success() {
                     // An agent may have failed since the last look, and be why the world did.
@@ -318,7 +338,7 @@ impl Fleet<'_> {
                 }
                 return Ok(Outcome { complete: control.stop == 0, peak_rss_kib: vec![] });
             }
-            if stop.hurry_asked() {
+            if stopped_at_once.is_some() {
                 // Every process is being brought down: none failed, none is restarted.
                 ports.waiter().sleep(DRAIN_EVERY)?;
                 continue;
@@ -360,13 +380,24 @@ impl Fleet<'_> {
         std::iter::once(&mut self.world).chain(self.agents.iter_mut().map(|a| &mut a.process))
     }
 
+    /// How long a world asked to stop may take to end the run: the round under way (each
+    /// agent's answer may take `--agent-timeout-ms`), the stop round (the agents' final
+    /// tables, [`STOP_ROUND_WAIT`] at least) and the last records (the world's
+    /// [`REPORT_TIMEOUT`]), and [`STOP_SPARE`]. Past it the world is taken for hung (stopped
+    /// by someone, or stuck) and the run is stopped at once, as by a second Ctrl-C: a single
+    /// SIGTERM to the supervisor must end the run.
+    fn stop_bound(&self) -> Duration {
+        let agent_timeout = Duration::from_millis(self.config.agent_timeout_ms);
+        agent_timeout + agent_timeout.max(STOP_ROUND_WAIT) + REPORT_TIMEOUT + STOP_SPARE
+    }
+
     /// Ctrl-Z: stops the world and the agents, then the supervisor itself; once continued,
     /// continues the agents, then the world (see [`crate::suspend`]), and notes the pause
-    /// (the run's timings include it).
-    fn pause(&mut self, recorder: &mut Recorder) -> Result<()> {
+    /// (the run's timings include it). Returns how long the run was paused.
+    fn pause(&mut self, recorder: &mut Recorder) -> Result<Duration> {
         // Continued before it took effect (`kill -TSTP` then `kill -CONT` at once): no pause.
         if self.ctrl_z.continued() {
-            return Ok(());
+            return Ok(Duration::ZERO);
         }
         recorder.say("pausing (Ctrl-Z): the world and the agents stop with the supervisor");
         self.each_running(|process| process.pause())?;
@@ -381,7 +412,7 @@ impl Fleet<'_> {
                 paused.as_secs_f64()
             ));
         }
-        Ok(())
+        Ok(paused.unwrap_or_default())
     }
 
     /// Takes every process that still runs a step down the shutdown ladder, without the stop
@@ -402,17 +433,20 @@ impl Fleet<'_> {
         Ok(())
     }
 
-    /// Ends a run stopped at once, once the world has left (`world`, its exit): brings the
-    /// agents down and notes how each one that had not already failed left, with its last
-    /// words (where its tables are, or why they are not), and a world that failed by itself
-    /// rather than leave as asked.
-    fn finish_hurrying(&mut self, world: ExitStatus, recorder: &mut Recorder) -> Result<Outcome> {
+    /// Ends a run stopped at once (`why`), once the world has left (`world`, its exit):
+    /// brings the agents down and notes how each one that had not already failed left, with
+    /// its last words (where its tables are, or why they are not), and a world that failed
+    /// by itself rather than leave as asked.
+    fn finish_hurrying(
+        &mut self,
+        world: ExitStatus,
+        why: &str,
+        recorder: &mut Recorder,
+    ) -> Result<Outcome> {
         self.bring_agents_down(|_| true)?;
-        recorder.note(
-            "stopped at once by a second Ctrl-C or SIGTERM: the processes left without the \
-             stop round, each at its next wait"
-                .to_string(),
-        );
+        recorder.note(format!(
+            "{why}: the processes left without the stop round, each at its next wait"
+        ));
         // Or it finished the run just as it was told to leave.
         let left_as_asked = world.success()
             || world.code() == Some(EXIT_TERMINATED.into())

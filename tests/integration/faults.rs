@@ -793,6 +793,37 @@ fn a_stopped_agent_saves_its_tables_before_it_is_restarted() {
     assert_nothing_left(&id);
 }
 
+/// A world that cannot end the stop round (here stopped with SIGSTOP: it looks hung) does not
+/// keep a stopped run waiting: a single Ctrl-C or SIGTERM ends the run once the world has
+/// had the time the stop round may take (about 50 s here), as a second one would at once.
+/// Before, the supervisor waited for the world for good (a user test: still waiting after
+/// 12 minutes).
+#[test]
+fn a_hung_world_does_not_keep_a_stopped_run_waiting() {
+    let dir = scratch();
+    let (id, out) = (run_id("hung-world"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 10000000 --trials 1"),
+    ));
+    wait_until("episodes to be recorded", DEADLOCK, || {
+        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 10_000)
+    });
+    for pid in world_pids(&id) {
+        signal(pid, libc::SIGSTOP);
+    }
+    run.interrupt();
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "{report}");
+    let s = summary(dir.path());
+    assert_eq!(s["complete"], false, "{s:#}");
+    let notes = notes(&s);
+    let overdue = "stopped at once: the world had not ended the stop round in time";
+    assert!(notes.iter().any(|note| note.starts_with(overdue)), "{notes:?}");
+    assert_nothing_left(&id);
+}
+
 /// A known limit (docs/MEMBERSHIP.md): no episode record may be lost, so a process that
 /// subscribes to them and never reads stalls the world. The run must then fail in bounded
 /// time with the service named, keep what was collected, and leave nothing behind.

@@ -95,6 +95,10 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
 /// one that failed by itself.
 pub const EXIT_TERMINATED: u8 = 143;
 
+/// The least the world waits for the agents' answers to the stop round: each answers once
+/// its final Q-tables are written.
+pub const STOP_ROUND_WAIT: Duration = Duration::from_secs(30);
+
 pub fn run(args: &WorldArgs) -> Result<()> {
     let run = RunConfig::new(&args.run_id, SignalMode::Supervised);
     if let Some(parent) = args.parent_pid {
@@ -399,11 +403,8 @@ impl WorldNode {
             }
             let stopping = round.kind == ObservationKind::Stop as u8;
             // The agents' last answer comes after their snapshots: allow for writing them.
-            let timeout = if stopping {
-                self.agent_timeout.max(Duration::from_secs(30))
-            } else {
-                self.agent_timeout
-            };
+            let timeout =
+                if stopping { self.agent_timeout.max(STOP_ROUND_WAIT) } else { self.agent_timeout };
             let answered = self.collect_actions(round, timeout, !stopping)?;
             if stopping {
                 // An agent answers the stop round once its final snapshots are written: one
