@@ -11,6 +11,7 @@ pub mod config;
 pub mod curve;
 pub mod inproc;
 pub mod interrupt;
+pub mod out_lock;
 pub mod plot;
 pub mod recorder;
 pub mod reproduce;

@@ -6,6 +6,7 @@ use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::curve;
 use crate::interrupt::Interrupts;
+use crate::out_lock::OutDirLock;
 use crate::plot::{plot_curves, Reference, Series};
 use crate::recorder::Recorder;
 use crate::results::{Collector, EvalPlan};
@@ -56,7 +57,8 @@ pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> 
         // Before anything is written or started: this run would read the other's records.
         crate::shm::prepare(&config.run_id)?;
     }
-    prepare_out_dir(config)?;
+    // Held until the results are written.
+    let _out_lock = prepare_out_dir(config)?;
     let e = &config.episodes;
     let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
     let collector = Collector::create(&config.out, config.uavs, config.trials, plan)?;
@@ -94,14 +96,16 @@ pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> 
     }
 }
 
-/// Creates the results directory (removing an earlier run's results there if asked to) and
-/// checks it can be written, before any process starts.
-fn prepare_out_dir(config: &RunConfig) -> Result<()> {
+/// Creates the results directory and locks it for the run (see [`OutDirLock`]), removes an
+/// earlier run's results there if asked to, and checks it can be written, before any
+/// process starts.
+fn prepare_out_dir(config: &RunConfig) -> Result<OutDirLock> {
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("cannot create results directory {}", config.out.display()))?;
+    let lock = OutDirLock::take(&config.out)?;
     if config.overwrite {
         crate::results::remove_earlier_results(&config.out)?;
     }
-    std::fs::create_dir_all(&config.out)
-        .with_context(|| format!("cannot create results directory {}", config.out.display()))?;
     let probe = config.out.join(".write-test");
     std::fs::write(&probe, b"")
         .with_context(|| format!("cannot write to results directory {}", config.out.display()))?;
@@ -113,7 +117,7 @@ fn prepare_out_dir(config: &RunConfig) -> Result<()> {
     if let Some(resume) = &config.resume {
         copy_resumed_snapshots(config, resume)?;
     }
-    Ok(())
+    Ok(lock)
 }
 
 /// Copies the snapshots a resumed run starts from into its own `qtables/`, unless they are

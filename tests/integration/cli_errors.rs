@@ -172,6 +172,35 @@ fn an_earlier_runs_results_are_kept_unless_overwrite_is_given() {
     assert_ne!(read(&out.join("episodes.csv")), episodes, "not replaced by the seed-2 run");
 }
 
+/// A second run given the `--out` of a run still writing there is refused, `--overwrite` or
+/// not, and the first run's results are untouched: before, `--overwrite` removed them while
+/// the first run went on, and the two runs' files ended up mixed (a user test).
+#[test]
+fn the_results_directory_of_a_live_run_is_refused() {
+    let dir = scratch();
+    let out = dir.path().display().to_string();
+    let id = run_id("live-out");
+    let args = ["--transport", "shm", "--run-id", &id, "--out", &out, "--quiet"];
+    let rest = words("--scenario s3 --uavs 2 --episodes 10000000 --trials 1");
+    let live = Spawned::start(SUPERVISOR, &[&args[..], &rest[..]].concat());
+    let episodes = dir.path().join("episodes.csv");
+    crate::harness::wait_until("episodes to be recorded", Duration::from_secs(60), || {
+        std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 10_000)
+    });
+    for transport in ["shm", "inproc"] {
+        let second = ["--transport", transport, "--out", &out, "--overwrite", "--episodes", "10"];
+        let line = error_line(&[&second[..], &["--scenario", "s3", "--uavs", "2"]].concat());
+        let expected = format!("--out {out}: another run is writing its results there");
+        assert!(line.contains(&expected), "{transport}: {line}");
+    }
+    assert!(std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 10_000), "removed");
+    live.interrupt();
+    let (status, report) = live.finish(Duration::from_secs(120));
+    assert_eq!(status.status.code(), Some(130), "{report}");
+    assert_eq!(summary(dir.path())["run_id"], id.as_str(), "{report}");
+    assert_nothing_left(&id);
+}
+
 #[test]
 fn settings_that_would_make_a_run_meaningless() {
     for_both_transports(&["--agent-timeout-ms", "0"], &["--agent-timeout-ms must be at least 1"]);
