@@ -6,7 +6,7 @@
 use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
-use crate::results::Flown;
+use crate::results::{EvalPlan, Flown, GreedyStats};
 use crate::run::Outcome;
 use anyhow::{Context, Result};
 use clap::ValueEnum;
@@ -53,6 +53,7 @@ pub fn summary(
         "run_id": config.run_id,
         "transport": format!("{:?}", config.transport).to_lowercase(),
         "complete": outcome.complete,
+        "every_agent_flew_every_episode": every_agent_flew_every_episode(config, recorder, &greedy),
         "notes": notes,
         "peak_rss_kib": outcome.peak_rss_kib.iter().map(|(name, kib)| json!({ "process": name, "kib": kib })).collect::<Vec<_>>(),
         "scenario": config.scenario_arg,
@@ -102,6 +103,29 @@ pub fn summary(
 /// (as is when it cannot be: it was there when the run started).
 fn absolute(path: &Path) -> String {
     path.canonicalize().unwrap_or_else(|_| path.to_path_buf()).display().to_string()
+}
+
+/// Whether every agent the run started flew every training and greedy episode of every
+/// trial. A run that lost an agent, for good or until its restart, may still have run to
+/// its end (`complete`); its results are then those of fewer agents for a while, which this
+/// says without reading `notes`.
+fn every_agent_flew_every_episode(
+    config: &RunConfig,
+    recorder: &Recorder,
+    greedy: &[Option<GreedyStats>],
+) -> bool {
+    let lengths = recorder.collector().train_lengths();
+    let e = &config.episodes;
+    let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
+    // Counts past `u64` are refused by `RunConfig::resolve`.
+    let greedy_per_trial = plan.greedy_episodes(e.eval_episodes).unwrap_or(u64::MAX);
+    (0..config.uavs).all(|slot| {
+        let trials = lengths.get(slot).map_or(&[][..], Vec::as_slice);
+        let trained = trials.len() == config.trials
+            && trials.iter().all(|flown| flown.len() as u64 == e.train_episodes);
+        let evaluated = greedy.get(slot).and_then(Option::as_ref).map_or(0, |g| g.episodes);
+        trained && evaluated == greedy_per_trial * config.trials as u64
+    })
 }
 
 /// Every agent that flew a training episode: its number, whether it attached to the run (on

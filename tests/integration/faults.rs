@@ -166,6 +166,8 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
         assert!(status.status.success(), "attempt {attempt}\n{report}");
         let s = summary(dir.path());
         assert_eq!(s["complete"], true, "attempt {attempt}: {s:#}");
+        // It ran to its end, without UAV2 since it was killed.
+        assert_eq!(s["every_agent_flew_every_episode"], false, "attempt {attempt}: {s:#}");
         let notes = s["notes"].to_string();
         assert!(
             notes.contains("UAV2 failed") && notes.contains("SIGKILL"),
@@ -740,6 +742,8 @@ fn a_hung_agent_is_reported_and_restarted() {
     assert!(status.status.success(), "{report}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], true, "{s:#}");
+    // UAV2 missed the episodes flown while it was down.
+    assert_eq!(s["every_agent_flew_every_episode"], false, "{s:#}");
     let notes = notes(&s);
     assert_eq!(notes.len(), 2, "one drop, one restart: {notes:?}");
     assert!(
@@ -1071,6 +1075,7 @@ fn ctrl_z_pauses_the_whole_run_and_it_resumes_where_it_was() {
     assert!(status.status.success(), "{report}");
     let s = summary(dir.path());
     assert_eq!(s["complete"], true, "{s:#}");
+    assert_eq!(s["every_agent_flew_every_episode"], true, "{s:#}");
     let notes = notes(&s);
     assert!(
         notes.len() == 1 && notes[0].starts_with("paused for ") && notes[0].contains("Ctrl-Z"),
