@@ -362,6 +362,9 @@ fn check_snapshots(config: &RunConfig, dir: &Path, flag: &str) -> Result<()> {
 /// is removed or written; the second also when `out` holds no earlier run, as `--overwrite`
 /// removes those entries all the same.
 fn check_out_dir(out: &Path, overwrite: bool, resume: Option<(&Path, &str)>) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        bail!("results directory {}: is a file, not a directory", out.display());
+    }
     if let Some((resume, flag)) = resume.filter(|_| overwrite) {
         if same_dir(resume, out) {
             bail!(

@@ -84,12 +84,20 @@ pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> 
     outcome.peak_rss_kib.insert(0, ("supervisor".to_string(), own_peak_rss_kib()));
     let error = result.as_ref().err().map(|e| format!("{e:#}"));
     let written = write_results(config, &recorder, wall, &outcome, error.as_deref());
-    // One error line: what failed the run, and what could not be written of its results.
     let unwritten = [finished.err(), written.err()].into_iter().flatten().next();
+    one_error(result, unwritten)
+}
+
+/// One error line: what failed the run, and what could not be written of its results.
+fn one_error(result: Result<Outcome>, unwritten: Option<anyhow::Error>) -> Result<Outcome> {
     match (result, unwritten) {
         (Ok(outcome), None) => Ok(outcome),
         (Ok(_), Some(unwritten)) => Err(unwritten),
         (Err(failed), None) => Err(failed),
+        // A full disk fails the run and then the results with the same words: said once.
+        (Err(failed), Some(unwritten)) if format!("{failed:#}") == format!("{unwritten:#}") => {
+            Err(failed)
+        }
         (Err(failed), Some(unwritten)) => {
             Err(anyhow::anyhow!("{failed:#}; and its results could not be written: {unwritten:#}"))
         }
@@ -211,4 +219,23 @@ fn write_results(
     plot_curves(&config.out.join("curve.svg"), &title, &series, &references)?;
     let value = summary::summary(config, recorder, wall, outcome, error);
     summary::write(&config.out.join("summary.json"), &value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failure_and_the_results_it_kept_from_being_written_make_one_error_line() {
+        let failed = || Err(anyhow::anyhow!("cannot write episodes.csv: No space left on device"));
+        let same = one_error(failed(), failed().err()).unwrap_err();
+        assert_eq!(format!("{same:#}"), "cannot write episodes.csv: No space left on device");
+        let other =
+            one_error(failed(), Some(anyhow::anyhow!("cannot write curve.csv"))).unwrap_err();
+        assert_eq!(
+            format!("{other:#}"),
+            "cannot write episodes.csv: No space left on device; and its results could not be \
+             written: cannot write curve.csv"
+        );
+    }
 }

@@ -286,8 +286,8 @@ impl Fleet<'_> {
                 // The stop round waits for every agent's final tables: up to 30 s for one
                 // that hangs, so say what is going on.
                 recorder.say(
-                    "stopping: every agent saves its Q-tables in the next round (Ctrl-C again \
-                     to stop at once)",
+                    "stopping: every agent saves its Q-tables in the next round (Ctrl-C or \
+                     SIGTERM again to stop at once)",
                 );
             }
             if self.ctrl_z.requested() {

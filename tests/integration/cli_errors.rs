@@ -106,6 +106,12 @@ fn results_directory_that_cannot_be_written() {
     fails_on_both_transports(&out, &[], |line, transport| {
         assert!(line.contains("results directory") && line.contains(&out), "{line} ({transport})");
     });
+    // A file given as the directory is named as such (it used to say "File exists").
+    let file = file.display().to_string();
+    fails_on_both_transports(&file, &[], |line, transport| {
+        let expected = format!("results directory {file}: is a file, not a directory");
+        assert!(line.contains(&expected), "{line} ({transport})");
+    });
 }
 
 /// A repeated command must not silently replace a finished run: `--out` holding one is
