@@ -301,6 +301,15 @@ fn serve(
             if !ports.await_world_gone(world_timeout)? && !termination_requested() {
                 tracing::warn!("the world did not leave after the stop round; leaving anyway");
             }
+            if ask != Ask::Own(slot) {
+                // Nobody else tells the user of an attached agent that it is done.
+                flockstep_proto::output::message(&format!(
+                    "agent: run `{}` ended; the Q-tables of UAV{} are in {}",
+                    ports.run_id(),
+                    slot + 1,
+                    out.join("qtables").display()
+                ));
+            }
             return Ok(());
         }
         Err(error) => error,

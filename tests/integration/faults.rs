@@ -93,6 +93,10 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     let (attached, attach_report) =
         Spawned::start(AGENT, &["--attach", &id, "--out", &out]).finish(DEADLOCK);
     assert!(attached.status.success(), "{attach_report}");
+    // The one who started it is told that it is done, and where its tables are.
+    let said = String::from_utf8_lossy(&attached.stderr);
+    let expected = format!("agent: run `{id}` ended; the Q-tables of UAV3 are in {out}/qtables");
+    assert!(said.lines().any(|line| line == expected), "{attach_report}");
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
     let rows = episode_rows(dir.path());
