@@ -81,6 +81,15 @@ impl RunConfig {
         if args.smoothing == Some(0) {
             bail!("--smoothing must be at least 1 episode");
         }
+        // A window past the training would average the whole curve into one value, or
+        // smooth nothing at all (`--episodes 0`): a flag with no use is refused.
+        if let Some(window) = args.smoothing.filter(|&window| window as u64 > args.episodes) {
+            bail!(
+                "--smoothing {window} is more than the {} training episodes of a trial \
+                 (--episodes): give at most that, or leave --smoothing out",
+                args.episodes
+            );
+        }
         if args.agent_timeout_ms == Some(0) {
             bail!("--agent-timeout-ms must be at least 1: an agent silent that long in a round is dropped");
         }

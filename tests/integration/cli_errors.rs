@@ -211,6 +211,10 @@ fn the_results_directory_of_a_live_run_is_refused() {
 fn settings_that_would_make_a_run_meaningless() {
     for_both_transports(&["--agent-timeout-ms", "0"], &["--agent-timeout-ms must be at least 1"]);
     for_both_transports(&["--smoothing", "0"], &["--smoothing must be at least 1"]);
+    for_both_transports(
+        &["--smoothing", "100000", "--episodes", "100"],
+        &["--smoothing 100000 is more than the 100 training episodes of a trial"],
+    );
     // A negative value is a value out of range, not an unknown flag `-1`.
     for_both_transports(&["--alpha", "-1"], &["--alpha -1 is out of range [0, 1]"]);
     for_both_transports(&["--epsilon", "1.5"], &["--epsilon 1.5 is out of range [0, 1]"]);
