@@ -39,7 +39,9 @@ pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
     }
     let series: Vec<Series> =
         loaded.iter().map(|(label, points)| Series::from_episodes(label.clone(), points)).collect();
-    plot_curves(out, title, &series, &[])
+    plot_curves(out, title, &series, &[])?;
+    // As `generate`, a run and `reproduce` say what they wrote.
+    Ok(output::line(&out.display().to_string())?)
 }
 
 /// Writes the generated scenario `spec` as a `.map` file (it loads back as it is).

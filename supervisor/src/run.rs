@@ -182,7 +182,12 @@ fn write_results(
             let points: Vec<(u64, f64)> =
                 c.episodes.iter().copied().zip(c.smoothed.iter().copied()).collect();
             Series::from_episodes(
-                format!("UAV{} (mean of {} trials)", c.agent, config.trials),
+                format!(
+                    "UAV{} (mean of {} trial{})",
+                    c.agent,
+                    config.trials,
+                    if config.trials == 1 { "" } else { "s" }
+                ),
                 &points,
             )
         })

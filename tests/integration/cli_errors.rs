@@ -339,8 +339,10 @@ fn plot_refuses_a_file_name_for_another_format_than_svg() {
         assert!(!out.exists(), "{name} was written");
     }
     let out = dir.path().join("both.svg");
-    run_ok(SUPERVISOR, &["plot", "--curve", &spec, "--out", &out.display().to_string()]);
+    let printed =
+        run_ok(SUPERVISOR, &["plot", "--curve", &spec, "--out", &out.display().to_string()]);
     assert!(read(&out).starts_with(b"<svg"), "not an SVG");
+    assert_eq!(String::from_utf8_lossy(&printed.stdout).trim(), out.display().to_string());
 }
 
 /// Output that cannot be written used to panic (status 101 and a backtrace): stdout closed by
