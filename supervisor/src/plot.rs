@@ -18,6 +18,11 @@ use std::path::Path;
 pub struct Series {
     pub label: String,
     pub points: Vec<(f64, f64)>,
+    /// The series whose colour the line takes (an agent's periodic greedy lengths beside its
+    /// learning curve); such a line does not shape the fitted panel either, which is drawn
+    /// for the curves (a looping greedy policy sits near the tick cap). None: a curve of its
+    /// own colour.
+    pub of_curve: Option<usize>,
 }
 
 impl Series {
@@ -31,7 +36,7 @@ impl Series {
         if !last.is_multiple_of(step) {
             kept.push(points[last]);
         }
-        Series { label, points: kept }
+        Series { label, points: kept, of_curve: None }
     }
 
     /// [`Series::from_points`] of a learning curve's (episode, episode length) points.
@@ -147,12 +152,14 @@ fn whole_labels(range: &Range<f64>) -> usize {
     ((range.end - range.start).floor() as usize + 1).min(10)
 }
 
-/// The episode-length range of the second panel: the curves from episode `from` on, and the
-/// references up to twice their highest point (an optimum below the curves is what they are
+/// The episode-length range of the second panel: the curves (not the lines drawn in a
+/// curve's colour, [`Series::of_curve`]) from episode `from` on, and the references up to
+/// twice their highest point (an optimum below the curves is what they are
 /// read against; the greedy mean of a policy that loops, often near the tick cap, would
 /// squash them). None when fewer than two points are that late.
 fn zoom(series: &[Series], references: &[Reference], from: f64) -> Option<Range<f64>> {
-    let late = series.iter().flat_map(|s| s.points.iter().filter(|p| p.0 >= from).map(|p| p.1));
+    let curves = series.iter().filter(|s| s.of_curve.is_none());
+    let late = curves.flat_map(|s| s.points.iter().filter(|p| p.0 >= from).map(|p| p.1));
     let (count, lo, hi) = late
         .fold((0usize, f64::INFINITY, f64::NEG_INFINITY), |(n, lo, hi), y| {
             (n + 1, lo.min(y), hi.max(y))
@@ -213,7 +220,7 @@ impl Panel {
         mesh.draw()?;
         let x = self.x.clone();
         for (i, s) in series.iter().enumerate().filter(|(_, s)| !s.points.is_empty()) {
-            let color = COLORS[i % COLORS.len()];
+            let color = COLORS[s.of_curve.unwrap_or(i) % COLORS.len()];
             let points: Vec<(f64, f64)> =
                 s.points.iter().copied().filter(|p| p.0 >= x.start).collect();
             // A line through one point draws nothing.
@@ -343,6 +350,29 @@ mod tests {
         }
     }
 
+    /// An agent's periodic greedy lengths are drawn in its curve's colour, and a greedy
+    /// policy that loops (lengths at the tick cap) does not stretch the fitted panel.
+    #[test]
+    fn a_greedy_series_takes_its_curves_colour_and_leaves_the_fitted_panel_to_the_curves() {
+        let looping = Series {
+            label: "UAV1 greedy".into(),
+            points: vec![(2000.0, 1000.0), (6000.0, 1000.0)],
+            of_curve: Some(0),
+        };
+        let range = zoom(&[learned_by_episode_1000(), looping], &[], 1000.0).unwrap();
+        assert!(range.end < 13.5, "{range:?} is stretched by the greedy lengths");
+        let stroke = |c: RGBColor| format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        for (tied, next_drawn) in [(Some(0), false), (None, true)] {
+            let greedy = Series {
+                label: "UAV1 greedy".into(),
+                points: vec![(2000.0, 14.0), (6000.0, 13.0)],
+                of_curve: tied,
+            };
+            let svg = drawn_texts(&[learned_by_episode_1000(), greedy], &[]).join("\n");
+            assert_eq!(svg.contains(&stroke(COLORS[1])), next_drawn, "of curve {tied:?}");
+        }
+    }
+
     #[test]
     fn the_second_panel_starts_after_the_first_tenth_of_the_run() {
         let texts = drawn_texts(&[learned_by_episode_1000()], &[]);
@@ -377,7 +407,7 @@ mod tests {
 
     #[test]
     fn a_run_of_one_episode_gets_one_panel() {
-        let one = Series { label: "UAV1".into(), points: vec![(0.0, 40.0)] };
+        let one = Series { label: "UAV1".into(), points: vec![(0.0, 40.0)], of_curve: None };
         assert!(zoom(std::slice::from_ref(&one), &[], 0.0).is_none());
         let texts = drawn_texts(&[one], &[]);
         assert!(!texts.iter().any(|t| t.starts_with("after episode")), "a second panel: {texts:?}");
@@ -408,7 +438,8 @@ mod tests {
     /// iterations axis and no legend entry for the empty learning curves.
     #[test]
     fn a_plot_without_points_shows_its_references_alone() {
-        let empty = [Series { label: "UAV1 (mean of 4 trials)".into(), points: vec![] }];
+        let empty =
+            [Series { label: "UAV1 (mean of 4 trials)".into(), points: vec![], of_curve: None }];
         let greedy = Reference {
             label: "UAV1 greedy after training".into(),
             value: 250.0,
@@ -426,10 +457,11 @@ mod tests {
     /// A line through one point draws nothing: the point is drawn as a dot.
     #[test]
     fn a_series_of_one_point_is_drawn_as_a_dot() {
-        let one = [Series { label: "one".into(), points: vec![(0.0, 4.0)] }];
+        let one = [Series { label: "one".into(), points: vec![(0.0, 4.0)], of_curve: None }];
         let svg = drawn_texts(&one, &[]).join("\n");
         assert!(svg.contains("<circle"), "no dot in {svg}");
-        let two = [Series { label: "two".into(), points: vec![(0.0, 4.0), (1.0, 3.0)] }];
+        let two =
+            [Series { label: "two".into(), points: vec![(0.0, 4.0), (1.0, 3.0)], of_curve: None }];
         assert!(!drawn_texts(&two, &[]).join("\n").contains("<circle"), "a dot on a line");
     }
 
@@ -437,7 +469,8 @@ mod tests {
     #[test]
     fn a_plot_that_cannot_be_written_says_why_once() {
         let path = Path::new("/nonexistent/curve.svg");
-        let series = [Series { label: "UAV1".into(), points: vec![(0.0, 4.0), (1.0, 3.0)] }];
+        let series =
+            [Series { label: "UAV1".into(), points: vec![(0.0, 4.0), (1.0, 3.0)], of_curve: None }];
         let e = format!("{:#}", plot_curves(path, "test", &series, &[]).unwrap_err());
         assert_eq!(
             e,

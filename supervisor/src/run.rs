@@ -198,6 +198,8 @@ fn write_results(
         series.push(Series {
             label: format!("UAV{} greedy", agent + 1),
             points: points.iter().map(|&(x, y, _)| (x as f64, y)).collect(),
+            // Agent a's curve is series a.
+            of_curve: Some(agent),
         });
     }
     let references: Vec<Reference> = (0..collector.agents())
