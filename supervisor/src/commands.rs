@@ -44,11 +44,20 @@ pub fn plot(curves: &[String], out: &Path, title: &str) -> Result<()> {
     Ok(output::line(&out.display().to_string())?)
 }
 
-/// Writes the generated scenario `spec` as a `.map` file (it loads back as it is).
+/// Writes the generated scenario `spec` as a new `.map` file (it loads back as it is). An
+/// existing file is refused, as a run refuses a directory holding results: a map may have
+/// been edited by hand since it was generated.
 pub fn generate(spec: &str, out: &Path) -> Result<()> {
+    use std::io::Write;
     let text =
         flockstep_world::generate::generate_text(spec).map_err(|e| anyhow::anyhow!("{e}"))?;
-    std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+    let mut file = match std::fs::OpenOptions::new().write(true).create_new(true).open(out) {
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            anyhow::bail!("--out {}: the file exists; remove it or choose another", out.display())
+        }
+        opened => opened.with_context(|| format!("cannot write {}", out.display()))?,
+    };
+    file.write_all(text.as_bytes()).with_context(|| format!("cannot write {}", out.display()))?;
     Ok(output::line(&out.display().to_string())?)
 }
 

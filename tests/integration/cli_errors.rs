@@ -481,6 +481,26 @@ fn as_strs(args: &[String]) -> Vec<&str> {
     args.iter().map(String::as_str).collect()
 }
 
+/// `generate` writes a map that loads back as the scenario it generated, says where, and
+/// refuses to replace an existing file (a map may have been edited by hand): it used to
+/// overwrite it silently.
+#[test]
+fn generate_writes_a_new_map_and_refuses_an_existing_file() {
+    let dir = scratch();
+    let spec = "gen:uavs=2,targets=3,seed=2";
+    let out = dir.path().join("n2.map");
+    let path = out.display().to_string();
+    let printed = run_ok(SUPERVISOR, &["generate", spec, "--out", &path]);
+    assert_eq!(String::from_utf8_lossy(&printed.stdout).trim(), path);
+    let generated = flockstep_world::Scenario::resolve(spec).expect("the scenario generates");
+    let loaded = flockstep_world::Scenario::resolve(&path).expect("the map loads");
+    assert_eq!(loaded.source_text(), generated.source_text());
+    std::fs::write(&out, "edited by hand").unwrap();
+    let line = error_line(&["generate", spec, "--out", &path]);
+    assert!(line.contains(&format!("--out {path}: the file exists")), "{line}");
+    assert_eq!(read(&out), b"edited by hand", "the file was replaced");
+}
+
 /// A route that cannot see some target has no optimum: `optimum` says why for that route,
 /// once and naming it once, and still prints the other route's numbers.
 #[test]
