@@ -1100,25 +1100,24 @@ fn ctrl_z_pauses_the_whole_run_and_it_resumes_where_it_was() {
 #[test]
 fn ctrl_c_as_the_run_starts_stops_it() {
     for attempt in 0..20 {
-        let dir = scratch();
-        let (id, out) = (run_id(&format!("start-stop{attempt}")), dir.path().display().to_string());
-        let run = Spawned::supervisor(&run_args(
-            &id,
-            &out,
-            &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1"),
-        ));
-        let pid = run.pid();
-        wait_until(&format!("process {pid} to handle SIGINT"), DEADLOCK, || {
-            catches(pid, libc::SIGINT)
-        });
-        std::thread::sleep(Duration::from_millis(2 * attempt));
-        signal(pid, libc::SIGINT);
+        let (_dir, id, run) = long_run(&format!("start-stop{attempt}"));
+        run.interrupt_after(Duration::from_millis(2 * attempt));
         let (status, report) = run.finish(DEADLOCK);
         assert_eq!(status.status.code(), Some(130), "attempt {attempt}\n{report}");
         let stderr = String::from_utf8_lossy(&status.stderr);
         assert!(!stderr.contains("error"), "attempt {attempt}\n{report}");
         assert_nothing_left(&id);
     }
+}
+
+/// A run of s3 long enough to be stopped (50 000 episodes, 1 trial), results in the scratch
+/// directory returned, under a run id made of `tag`.
+fn long_run(tag: &str) -> (tempfile::TempDir, String, Spawned) {
+    let dir = scratch();
+    let (id, out) = (run_id(tag), dir.path().display().to_string());
+    let args = words("--scenario s3 --uavs 2 --episodes 50000 --trials 1");
+    let run = Spawned::supervisor(&run_args(&id, &out, &args));
+    (dir, id, run)
 }
 
 /// Ctrl-C as soon as the agents start: the world's first round is then the stop round, which
@@ -1129,13 +1128,7 @@ fn ctrl_c_as_the_run_starts_stops_it() {
 #[test]
 fn ctrl_c_as_the_agents_start_stops_every_run_in_order() {
     for attempt in 0..10 {
-        let dir = scratch();
-        let (id, out) = (run_id(&format!("early-stop{attempt}")), dir.path().display().to_string());
-        let run = Spawned::supervisor(&run_args(
-            &id,
-            &out,
-            &words("--scenario s3 --uavs 2 --episodes 50000 --trials 1"),
-        ));
+        let (dir, id, run) = long_run(&format!("early-stop{attempt}"));
         wait_for_agent(&id, 2);
         run.interrupt();
         let (status, report) = run.finish(DEADLOCK);

@@ -272,10 +272,16 @@ impl Spawned {
     /// Sends SIGINT, as Ctrl-C does, once the process has its handler for it (at most 30 s):
     /// before that, the signal's default action would kill it, which tests nothing.
     pub fn interrupt(&self) {
+        self.interrupt_after(Duration::ZERO);
+    }
+
+    /// [`Self::interrupt`], `delay` after the process has its handler.
+    pub fn interrupt_after(&self, delay: Duration) {
         let pid = self.pid();
         wait_until(&format!("process {pid} to handle SIGINT"), Duration::from_secs(30), || {
             catches(pid, libc::SIGINT)
         });
+        std::thread::sleep(delay);
         signal(pid, libc::SIGINT);
     }
 
