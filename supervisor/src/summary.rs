@@ -6,7 +6,7 @@
 use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::recorder::Recorder;
-use crate::results::{EvalPlan, Flown, GreedyStats};
+use crate::results::{Flown, GreedyStats};
 use crate::run::Outcome;
 use anyhow::{Context, Result};
 use clap::ValueEnum;
@@ -116,15 +116,13 @@ fn every_agent_flew_every_episode(
 ) -> bool {
     let lengths = recorder.collector().train_lengths();
     let e = &config.episodes;
-    let plan = EvalPlan::new(e.train_episodes, e.eval_every, e.eval_block);
-    // Counts past `u64` are refused by `RunConfig::resolve`.
-    let greedy_per_trial = plan.greedy_episodes(e.eval_episodes).unwrap_or(u64::MAX);
     (0..config.uavs).all(|slot| {
         let trials = lengths.get(slot).map_or(&[][..], Vec::as_slice);
         let trained = trials.len() == config.trials
             && trials.iter().all(|flown| flown.len() as u64 == e.train_episodes);
+        // The evaluation after training (the periodic blocks are on the greedy curve).
         let evaluated = greedy.get(slot).and_then(Option::as_ref).map_or(0, |g| g.episodes);
-        trained && evaluated == greedy_per_trial * config.trials as u64
+        trained && evaluated == e.eval_episodes * config.trials as u64
     })
 }
 

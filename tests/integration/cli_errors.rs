@@ -676,6 +676,8 @@ fn the_summary_records_the_whole_configuration() {
     );
     assert_eq!(inproc["eval_every"], 2);
     assert_eq!(inproc["eval_block"], 3);
+    // The periodic blocks are not the evaluation after training it counts.
+    assert_eq!(inproc["every_agent_flew_every_episode"], true, "{inproc:#}");
     for key in ["restart", "snapshot_every", "agent_timeout_ms"] {
         assert!(inproc[key].is_null(), "{key} of an in-process run: {}", inproc[key]);
     }
@@ -692,6 +694,7 @@ fn the_summary_records_the_whole_configuration() {
     assert_eq!(shm["restart"], "never");
     assert_eq!(shm["snapshot_every"], 10_000);
     assert_eq!(shm["agent_timeout_ms"], 900);
+    assert_eq!(shm["every_agent_flew_every_episode"], true, "{shm:#}");
     assert!(shm["tree_file"].is_null(), "the built-in tree has no file");
 }
 
