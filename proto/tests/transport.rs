@@ -388,6 +388,15 @@ fn dead_nodes_lock() -> std::sync::MutexGuard<'static, ()> {
     DEAD_NODES.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
+/// Cleans `config`'s run and checks that `dead_nodes` dead nodes were removed, none is left
+/// counted as live, and nothing of the run is left on disk (`context` names the case).
+fn assert_swept(config: &RunConfig, dead_nodes: usize, context: &str) {
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (dead_nodes, 0), "{context} {cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "{context} left behind after clean-up: {after:#?}");
+}
+
 /// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.
 fn spawn_and_kill(config: &RunConfig, role: &str) {
     let (mut child, _, _) = spawn_child(config, role);
@@ -485,10 +494,7 @@ fn a_killed_world_is_swept() {
         "a SIGKILL must leave files behind"
     );
 
-    let cleaned = cleanup_run(&config.run_id).unwrap();
-    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
-    let after = leftover_files(&config.run_id).unwrap();
-    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+    assert_swept(&config, 1, "");
     let sweep = sweep_stale_runs().unwrap();
     assert!(!sweep.live_runs.contains(&config.run_id), "{sweep:?}");
 }
@@ -514,10 +520,7 @@ fn what_a_node_killed_while_it_created_a_port_leaves_is_swept() {
     let tag = half_made(node_dir.join(format!("{prefix}1234.port_tag")), 0o600);
     let event = half_made(format!("/dev/shm/{prefix}abcd_1234.event_mgmt").into(), 0o200);
 
-    let cleaned = cleanup_run(&config.run_id).unwrap();
-    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
-    let after = leftover_files(&config.run_id).unwrap();
-    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+    assert_swept(&config, 1, "");
     assert!(!node_dir.exists() && !tag.exists() && !event.exists(), "{node_dir:?}");
 }
 
@@ -557,10 +560,8 @@ fn a_node_whose_clean_up_was_killed_halfway_is_swept() {
             std::fs::create_dir(&node_dir).unwrap();
         }
 
-        let cleaned = cleanup_run(&config.run_id).unwrap();
-        assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{test}: {cleaned:?}");
-        let after = leftover_files(&config.run_id).unwrap();
-        assert!(after.is_empty() && !node_dir.exists(), "{test}: left {after:#?}");
+        assert_swept(&config, 1, test);
+        assert!(!node_dir.exists(), "{test}: the node's directory is left");
     }
 }
 
@@ -662,10 +663,8 @@ fn nodes_that_died_as_they_started_are_swept_and_one_starting_is_kept() {
     assert!(!making_monitor.exists() && left.is_empty(), "died making its monitor, left {left:?}");
     assert!(starting.exists(), "the directory of a node still starting was removed");
     drop(held);
-    let cleaned = cleanup_run(&config.run_id).unwrap();
-    assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (1, 0), "{cleaned:?}");
-    let after = leftover_files(&config.run_id).unwrap();
-    assert!(after.is_empty() && !starting.exists(), "left behind: {after:#?}");
+    assert_swept(&config, 1, "");
+    assert!(!starting.exists(), "the node that had been starting is left");
 }
 
 /// A process killed between creating a segment and sizing it leaves an empty one; iceoryx2,

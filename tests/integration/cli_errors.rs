@@ -190,9 +190,7 @@ fn the_results_directory_of_a_live_run_is_refused() {
     let rest = words("--scenario s3 --uavs 2 --episodes 10000000 --trials 1");
     let live = Spawned::start(SUPERVISOR, &[&args[..], &rest[..]].concat());
     let episodes = dir.path().join("episodes.csv");
-    crate::harness::wait_until("episodes to be recorded", Duration::from_secs(60), || {
-        std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 10_000)
-    });
+    crate::harness::wait_for_records(&episodes, 10_000, Duration::from_secs(60));
     for transport in ["shm", "inproc"] {
         let second = ["--transport", transport, "--out", &out, "--overwrite", "--episodes", "10"];
         let line = error_line(&[&second[..], &["--scenario", "s3", "--uavs", "2"]].concat());

@@ -5,7 +5,7 @@
 use crate::harness::{
     agent_pids, assert_nothing_left, assert_same_file, catches, comm_entry, episode_rows,
     first_gap, mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
-    wait_for_agent, wait_until, words, world_log, world_pids, Spawned, AGENT,
+    wait_for_agent, wait_for_records, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
 use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
@@ -785,9 +785,7 @@ fn a_stopped_agent_saves_its_tables_before_it_is_restarted() {
         &words("--scenario s3 --uavs 2 --episodes 60000 --trials 2 --seed 97 --restart on-failure --snapshot-every 0 --eval-episodes 10"),
     ));
     let uav2 = wait_for_agent(&id, 2);
-    wait_until("episodes to be recorded", DEADLOCK, || {
-        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 10_000)
-    });
+    wait_for_records(&dir.path().join("episodes.csv"), 10_000, DEADLOCK);
     for &pid in &uav2 {
         signal(pid, libc::SIGSTOP);
     }
@@ -815,9 +813,7 @@ fn a_hung_world_does_not_keep_a_stopped_run_waiting() {
         &out,
         &words("--scenario s3 --uavs 2 --episodes 10000000 --trials 1"),
     ));
-    wait_until("episodes to be recorded", DEADLOCK, || {
-        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 10_000)
-    });
+    wait_for_records(&dir.path().join("episodes.csv"), 10_000, DEADLOCK);
     for pid in world_pids(&id) {
         signal(pid, libc::SIGSTOP);
     }

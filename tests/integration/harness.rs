@@ -498,6 +498,13 @@ pub fn comm_entry(words: &[u64], k: usize) -> u64 {
     words.get(2 * k / 64).map_or(0, |w| (w >> (2 * k % 64)) & 3)
 }
 
+/// Waits, at most `timeout`, until the file at `path` (a run's `episodes.csv`, ...) holds
+/// more than `bytes`: the run is under way and recording.
+pub fn wait_for_records(path: &Path, bytes: u64, timeout: Duration) {
+    let what = format!("more than {bytes} bytes in {}", path.display());
+    wait_until(&what, timeout, || std::fs::metadata(path).is_ok_and(|m| m.len() > bytes));
+}
+
 /// Asserts that nothing of run `id` is left: no process, no shared-memory file.
 pub fn assert_nothing_left(id: &str) {
     wait_until(&format!("the processes of run {id} to exit"), Duration::from_secs(10), || {
@@ -523,9 +530,7 @@ fn a_dropped_run_takes_every_process_it_started_down() {
     );
     let stubborn = wait_for_agent(&id, 2);
     // Under way, not in the middle of setting up its shared memory.
-    wait_until("episodes to be recorded", Duration::from_secs(30), || {
-        std::fs::metadata(dir.path().join("episodes.csv")).is_ok_and(|m| m.len() > 100)
-    });
+    wait_for_records(&dir.path().join("episodes.csv"), 100, Duration::from_secs(30));
     drop(run);
     wait_until(
         &format!(

@@ -3,8 +3,8 @@
 
 use crate::harness::{
     assert_nothing_left, episode_rows, error_line, first_gap, mean_length, notes, number, read,
-    repo_file, run_fail, run_id, run_ok, scratch, summary, supervise, wait_until, words, Spawned,
-    SUPERVISOR,
+    repo_file, run_fail, run_id, run_ok, scratch, summary, supervise, wait_for_records, words,
+    Spawned, SUPERVISOR,
 };
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::time::Duration;
@@ -235,9 +235,7 @@ fn an_evaluation_stopped_by_ctrl_c_exits_130_with_partial_results() {
     let qtables = dir.path().display().to_string();
     let eval = Spawned::supervisor(&["eval", "--qtables", &qtables, "--episodes", "100000000"]);
     let greedy = dir.path().join("eval").join("greedy_episodes.csv");
-    wait_until("greedy episodes to be recorded", Duration::from_secs(60), || {
-        std::fs::metadata(&greedy).is_ok_and(|m| m.len() > 1000)
-    });
+    wait_for_records(&greedy, 1000, Duration::from_secs(60));
     eval.interrupt();
     let (printed, report) = eval.finish(Duration::from_secs(120));
     assert_eq!(printed.status.code(), Some(130), "{report}");
@@ -256,9 +254,7 @@ fn eval_of_a_run_that_did_not_complete_says_so() {
     let setup = words("--transport inproc --scenario s1 --uavs 1 --trials 1 --episodes 100000000");
     let run = Spawned::supervisor(&[&setup[..], &["--quiet", "--out", &out]].concat());
     let episodes = dir.path().join("episodes.csv");
-    wait_until("training episodes to be recorded", Duration::from_secs(60), || {
-        std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 1000)
-    });
+    wait_for_records(&episodes, 1000, Duration::from_secs(60));
     run.interrupt();
     let (stopped, report) = run.finish(Duration::from_secs(120));
     assert_eq!(stopped.status.code(), Some(130), "{report}");
