@@ -22,7 +22,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
     exit_with_parent, termination_requested, ActionLoan, AgentPorts, ObservationSample, RunConfig,
-    RunServices, SignalMode, TransportError,
+    RunServices, SenderNode, SignalMode, TransportError,
 };
 use flockstep_proto::{
     FieldError, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -284,21 +284,24 @@ fn serve(
     }
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
+    // From here on a wait for the world also ends when its process is gone.
+    let waits =
+        WorldWaits { world: SenderNode::of(&first).pid().unwrap_or(0), timeout: world_timeout };
     let setup = match setup {
         Some(setup) => setup,
-        None => read_run_info(&ports, world_timeout)?,
+        None => read_run_info(&ports, waits)?,
     };
     let mut session = Session::new(slot, &setup, tree, learner, out)?;
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
-    let flown = fly(&ports, &mut session, first, nonce, &faults, world_timeout, trace.as_mut());
+    let flown = fly(&ports, &mut session, first, nonce, &faults, waits, trace.as_mut());
     let error = match flown {
         // The stop round is answered once the final tables are on disk: the world takes no
         // answer for a sign they are lost.
         Ok(stop_answer) => {
             session.save_all()?;
             stop_answer.send()?;
-            if !ports.await_world_gone(world_timeout)? && !termination_requested() {
+            if !ports.await_world_gone(waits.timeout, waits.world)? && !termination_requested() {
                 tracing::warn!("the world did not leave after the stop round; leaving anyway");
             }
             if ask != Ask::Own(slot) {
@@ -334,6 +337,14 @@ fn serve(
     bail!("{error:#}; its Q-tables are saved in {}", dir.display())
 }
 
+/// How an admitted agent waits for the world: for at most `timeout`, and only while its
+/// process `world` lives ([`AgentPorts::wait_on_world`]).
+#[derive(Debug, Clone, Copy)]
+struct WorldWaits {
+    world: u32,
+    timeout: Duration,
+}
+
 /// Answers every round from `first` (the round that admitted the agent) up to the stop
 /// round, whose answer it returns unsent: it goes out once the final snapshots are written.
 fn fly<'a>(
@@ -342,7 +353,7 @@ fn fly<'a>(
     first: ObservationSample,
     nonce: u64,
     faults: &[Fault],
-    world_timeout: Duration,
+    waits: WorldWaits,
     mut trace: Option<&mut Trace>,
 ) -> Result<ActionLoan<'a>> {
     let slot = session.agent.slot();
@@ -351,9 +362,10 @@ fn fly<'a>(
     loop {
         let observation = match admission.take() {
             Some(first) => first,
-            None => ports.waiter().wait(
+            None => ports.wait_on_world(
                 &format_args!("the observation of round {next_round}"),
-                world_timeout,
+                waits.timeout,
+                waits.world,
                 || {
                     while let Some(sample) = ports.try_observation()? {
                         if sample.round >= next_round {
@@ -460,8 +472,10 @@ fn await_admission(
 }
 
 /// Reads the run's description (for an attaching agent).
-fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
-    let info = ports.waiter().wait(&"the run's description", timeout, || ports.try_run_info())?;
+fn read_run_info(ports: &AgentPorts, waits: WorldWaits) -> Result<Setup> {
+    let description = &"the run's description";
+    let info =
+        ports.wait_on_world(description, waits.timeout, waits.world, || ports.try_run_info())?;
     Ok(Setup {
         scenario: RunInfo::unpack(&info.scenario, "run_info.scenario")?,
         trials: info.trials as usize,

@@ -79,10 +79,44 @@ fn an_agent_waits_for_the_world_to_leave() {
     let config = run("world-gone");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
-    let stayed = agent.await_world_gone(Duration::from_millis(50)).unwrap();
+    let world_process = std::process::id();
+    let stayed = agent.await_world_gone(Duration::from_millis(50), world_process).unwrap();
     assert!(!stayed, "the world is still there");
     drop(world);
-    assert!(agent.await_world_gone(BOUND).unwrap(), "the world has left");
+    assert!(agent.await_world_gone(BOUND, world_process).unwrap(), "the world has left");
+}
+
+/// The id of a process that has exited and been reaped.
+fn dead_process() -> u32 {
+    let mut child = std::process::Command::new("true").spawn().expect("spawn `true`");
+    child.wait().expect("reap `true`");
+    child.id()
+}
+
+/// A wait on a world whose process is gone ends within tens of milliseconds, naming the
+/// process and what it waited for, instead of at its deadline; a live world's process
+/// leaves the wait to its deadline. A world killed with SIGKILL leaves its ports behind,
+/// which is what the world's ports kept alive here stand for.
+#[test]
+fn a_wait_on_a_world_whose_process_is_gone_ends_at_once() {
+    let config = run("world-dead");
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let dead = dead_process();
+    let long = Duration::from_secs(60);
+    let started = std::time::Instant::now();
+    let what = format_args!("observation of round {}", 9);
+    let error = agent.wait_on_world(&what, long, dead, || agent.try_observation()).unwrap_err();
+    let text = error.to_string();
+    assert!(matches!(error, TransportError::WorldGone { pid, .. } if pid == dead), "{text}");
+    assert!(text.contains(&format!("process {dead}")) && text.contains("round 9"), "{text}");
+    assert!(started.elapsed() < long / 2, "noticed only after {:?}", started.elapsed());
+    assert!(agent.await_world_gone(long, dead).unwrap(), "its process is gone: so is the world");
+
+    let alive = std::process::id();
+    let waited =
+        agent.wait_on_world(&what, Duration::from_millis(100), alive, || agent.try_observation());
+    assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{waited:?}");
 }
 
 #[test]

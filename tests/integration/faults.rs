@@ -433,6 +433,48 @@ fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     assert_nothing_left(&id);
 }
 
+/// An attached agent is no child of the supervisor, which cannot bring it down when the
+/// world dies: it notices by itself that the world's process is gone, long before its
+/// `--world-timeout-ms` (it used to wait that out, 30 s by default), and leaves with its
+/// tables saved.
+#[test]
+fn an_attached_agent_notices_a_killed_world_at_once_and_keeps_its_tables() {
+    let dir = scratch();
+    let (id, out) = (run_id("attachkill"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s4 --uavs 2 --episodes 1000000 --trials 2 --seed 43"),
+    ));
+    wait_for_agent(&id, 2);
+    let world = world_pids(&id);
+    let attached =
+        Spawned::start(AGENT, &["--attach", &id, "--out", &out, "--world-timeout-ms", "600000"]);
+    wait_until("UAV3 to fly episodes", Duration::from_secs(30), || {
+        std::fs::read_to_string(dir.path().join("episodes.csv"))
+            .is_ok_and(|csv| csv.lines().any(|line| line.split(',').nth(1) == Some("3")))
+    });
+    for &pid in &world {
+        signal(pid, libc::SIGKILL);
+    }
+    let (left, report) = attached.try_finish(WORLD_KILL_BOUND).unwrap_or_else(|overdue| {
+        panic!("the attached agent did not notice (within {WORLD_KILL_BOUND:?}):\n{overdue}")
+    });
+    assert_eq!(left.status.code(), Some(1), "{report}");
+    let said = String::from_utf8_lossy(&left.stderr);
+    let gone = format!("the world (process {}) is gone", world[0]);
+    assert!(said.contains(&gone) && said.contains("its Q-tables are saved in"), "{report}");
+    for trial in 0..2 {
+        let saved = snapshot(dir.path(), 3, trial);
+        assert_eq!((saved.slot, saved.trial), (2, trial as u32));
+    }
+    let (status, report) = run.try_finish(WORLD_KILL_BOUND).unwrap_or_else(|overdue| {
+        panic!("the supervisor did not end at once (within {WORLD_KILL_BOUND:?}):\n{overdue}")
+    });
+    assert_eq!(status.status.code(), Some(1), "{report}");
+    assert_nothing_left(&id);
+}
+
 /// The path of agent `uav`'s (1-based) snapshot of `trial` under results directory `dir`.
 fn snapshot_file(dir: &std::path::Path, uav: usize, trial: usize) -> std::path::PathBuf {
     dir.join("qtables").join(format!("uav{uav}_trial{trial}.bin"))

@@ -14,7 +14,8 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    exit_with_parent, RunConfig, RunServices, SenderNode, SignalMode, TransportError, WorldPorts,
+    exit_with_parent, process_alive, process_stat, RunConfig, RunServices, SenderNode, SignalMode,
+    TransportError, WorldPorts, LOOK_AT_PROCESSES_AFTER,
 };
 use flockstep_proto::{
     slots_in, JoinRequest, Membership, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -448,12 +449,8 @@ impl WorldNode {
     ) -> Result<Answers> {
         let Self { world, ports, members, .. } = self;
         let (round, live) = (this_round.number, this_round.live);
-        // The clock is read for the death check only once the waiter's counted polls are over
-        // (it reads the clock itself from then on).
-        let policy = ports.waiter().policy();
-        let quick_polls = policy.spins + policy.yields;
-        let mut failed_polls = 0u32;
-        let mut slow_since = None;
+        // Rounds take microseconds: only a round this slow is worth a look at processes.
+        let mut overdue = ports.waiter().overdue_after(LOOK_AT_PROCESSES_AFTER);
         let mut answers = Answers::default();
         let waited =
             ports.waiter().wait(&format_args!("the answers of round {round}"), timeout, || {
@@ -499,13 +496,7 @@ impl WorldNode {
                 if missing == 0 {
                     return Ok(Some(()));
                 }
-                // Rounds take microseconds: only a round this slow is worth a look at processes.
-                failed_polls += 1;
-                if failed_polls <= quick_polls {
-                    return Ok(None);
-                }
-                let since = *slow_since.get_or_insert_with(Instant::now);
-                if since.elapsed() > DEATH_CHECK_AFTER {
+                if overdue.check() {
                     answers.gone = slots_in(missing)
                         .filter(|&s| !process_alive(members.pid(s)))
                         .fold(0, |m, s| m | 1 << s);
@@ -541,51 +532,16 @@ struct Answers {
 /// records it queued.
 const LOOK_FOR_REQUESTS_EVERY: Duration = Duration::from_millis(1);
 
-/// How long a round may take before the world checks whether the missing agents live.
-const DEATH_CHECK_AFTER: Duration = Duration::from_millis(20);
-
 /// A clock read costs about 27 ns here, half a percent of a round, and rounds used to read
 /// it for nothing but rare events. The world reads it for requests every this many rounds
 /// (about 0.1 ms at 2 UAVs, 1.6 ms at 32), and for dead agents only once its waiter blocks.
 const ROUNDS_BETWEEN_CLOCK_READS: u64 = 16;
-
-/// Whether process `pid` exists and is not a zombie (a killed agent stays a zombie until
-/// the supervisor reaps it). Pid 0 (unknown) counts as alive: the deadline decides then.
-fn process_alive(pid: u32) -> bool {
-    if pid == 0 {
-        return true;
-    }
-    proc_stat(pid).is_some_and(|fields| fields.first().is_some_and(|s| s != "Z" && s != "X"))
-}
 
 /// Whether the process of `node` is a child of the supervisor, as the agents it starts
 /// are: only those take the starting slots, so a stray process that asks for one first
 /// cannot shut its agent out. Without a known supervisor every process counts.
 fn started_by(supervisor: Option<u32>, node: SenderNode) -> bool {
     let Some(supervisor) = supervisor else { return true };
-    let parent = node.pid().and_then(proc_stat).and_then(|fields| fields.get(1)?.parse().ok());
+    let parent = node.pid().and_then(process_stat).and_then(|fields| fields.get(1)?.parse().ok());
     parent == Some(supervisor)
-}
-
-/// The fields of `/proc/<pid>/stat` after the command name (state, parent pid, ...); the
-/// name is in parentheses and may itself contain spaces and parentheses. None if the
-/// process is gone.
-fn proc_stat(pid: u32) -> Option<Vec<String>> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let (_, fields) = stat.rsplit_once(')')?;
-    Some(fields.split_whitespace().map(str::to_owned).collect())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn proc_stat_reads_the_parent_of_a_process_and_a_live_one_is_alive() {
-        let fields = proc_stat(std::process::id()).expect("this process has a stat file");
-        assert_eq!(fields[1], std::os::unix::process::parent_id().to_string(), "{fields:?}");
-        assert!(process_alive(std::process::id()));
-        assert!(process_alive(0), "an unknown pid is left to the deadline");
-        assert!(proc_stat(u32::MAX).is_none(), "no such process");
-    }
 }

@@ -3,6 +3,7 @@
 //! while it created a file). Also lists what a run left behind, so tests and the
 //! supervisor can check that a shutdown was clean.
 
+use super::process::{process_exists, process_of_node};
 use super::root::effective_uid;
 use super::{run_prefix, setup, Ipc, TransportError, PREFIX_HEAD};
 use crate::services;
@@ -184,17 +185,6 @@ fn remove_abandoned_node_dirs(config: &Config) -> Result<usize, TransportError> 
         }
     }
     Ok(removed)
-}
-
-/// The id of the process that created the node `node_id`, the name of its directory (see
-/// [`remove_abandoned_node_dirs`]).
-pub fn process_of_node(node_id: u128) -> u32 {
-    (node_id >> 64) as u32
-}
-
-/// Whether a process of that id exists, or cannot be told not to (a zombie exists).
-fn process_exists(pid: u32) -> bool {
-    !matches!(std::fs::metadata(format!("/proc/{pid}")), Err(e) if e.kind() == std::io::ErrorKind::NotFound)
 }
 
 /// Removes the directories and monitors of the run's nodes whose process died as the node

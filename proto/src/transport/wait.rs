@@ -135,11 +135,6 @@ impl Waiter {
         }
     }
 
-    /// How this waiter spins, yields and blocks (the world times its death check by it).
-    pub fn policy(&self) -> WaitPolicy {
-        self.policy
-    }
-
     /// Calls `poll` until it returns `Some`, for at most `timeout`. `what` names the awaited
     /// thing in the error (pass `&format_args!(..)`: it is only formatted on failure).
     ///
@@ -254,6 +249,13 @@ impl Waiter {
         }
     }
 
+    /// For the polls of this waiter's next wait: see [`Overdue`].
+    pub fn overdue_after(&self, after: Duration) -> Overdue {
+        let backing_off = self.block_until.get().is_some_and(|until| Instant::now() < until);
+        let quick_polls = if backing_off { 0 } else { self.policy.spins + self.policy.yields };
+        Overdue { quick_polls, polls: 0, since: None, after }
+    }
+
     fn check_termination(&self, what: &dyn Display) -> Result<(), TransportError> {
         if termination_requested() {
             return Err(TransportError::Terminated {
@@ -262,6 +264,31 @@ impl Waiter {
             });
         }
         Ok(())
+    }
+}
+
+/// Tells a wait's poll once the wait has gone on for a while, for a check too dear for every
+/// poll: whether a silent peer's process still exists (a read of `/proc`, µs, where a round
+/// takes a few). The waiter's counted polls come first and take microseconds in all, so
+/// none of them reads the clock here either (a backing-off waiter makes none); each later
+/// one reads it, as the waiter itself does then.
+#[derive(Debug)]
+pub struct Overdue {
+    quick_polls: u32,
+    polls: u32,
+    since: Option<Instant>,
+    after: Duration,
+}
+
+impl Overdue {
+    /// Counts a poll that found nothing: true once the polls have gone on for `after` since
+    /// the counted ones ended.
+    pub fn check(&mut self) -> bool {
+        self.polls = self.polls.saturating_add(1);
+        if self.polls <= self.quick_polls {
+            return false;
+        }
+        self.since.get_or_insert_with(Instant::now).elapsed() > self.after
     }
 }
 
