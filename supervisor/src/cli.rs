@@ -325,7 +325,8 @@ pub struct RunArgs {
     /// Episodes of each periodic greedy evaluation (only with --eval-every) [default: 100].
     #[arg(long)]
     pub eval_block: Option<u64>,
-    /// Smoothing window (episodes) of the learning curve [default: episodes / 100, at least 1].
+    /// Smoothing window (episodes) of the learning curve [default: a hundredth of the
+    /// training episodes flown (of --episodes unless stopped early), at least 1].
     #[arg(long)]
     pub smoothing: Option<usize>,
     /// Start every agent from the Q-table snapshots of an earlier run (`DIR/qtables/`).

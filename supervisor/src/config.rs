@@ -34,7 +34,9 @@ pub struct RunConfig {
     pub uavs: usize,
     pub trials: usize,
     pub seed: u64,
-    pub smoothing: usize,
+    /// The learning curve's window, if given (`--smoothing`); else it follows the episodes
+    /// the run trained ([`crate::curve::window`]).
+    pub smoothing: Option<usize>,
     pub out: PathBuf,
     /// `out` may hold an earlier run's results, which the run removes first.
     pub overwrite: bool,
@@ -145,7 +147,7 @@ impl RunConfig {
             uavs: args.uavs,
             trials: args.trials,
             seed: args.seed,
-            smoothing: args.smoothing.unwrap_or((args.episodes / 100).max(1) as usize),
+            smoothing: args.smoothing,
             out,
             transport: args.transport,
             run_id,

@@ -21,6 +21,14 @@ pub struct Curve {
     pub smoothed: Vec<f64>,
 }
 
+/// The smoothing window of a run that trained `trained` episodes: `explicit` (`--smoothing`)
+/// if given, else a hundredth of them. A run stopped early is smoothed by what it trained,
+/// not by what it planned: 1 000 episodes of a planned 50 000 smoothed over 500 would show
+/// little more than their running mean.
+pub fn window(explicit: Option<usize>, trained: u64) -> usize {
+    explicit.unwrap_or((trained / 100).max(1) as usize)
+}
+
 /// Curves of every agent from `lengths[agent][trial]`.
 pub fn curves(lengths: &[Vec<Flown>], window: usize) -> Vec<Curve> {
     lengths

@@ -5,7 +5,7 @@
 
 use crate::cli::{Figure, RunArgs};
 use crate::config::RunConfig;
-use crate::curve::read_smoothed;
+use crate::curve::{self, read_smoothed};
 use crate::interrupt::Interrupts;
 use crate::plot::{plot_curves, Reference, Series};
 use crate::run::run_experiment;
@@ -53,7 +53,8 @@ pub fn reproduce(
             return Ok(false);
         }
         let points = read_smoothed(&config.out.join("curve.csv"), 1)?;
-        curves.push((label, config.smoothing, points));
+        let window = curve::window(config.smoothing, config.episodes.train_episodes);
+        curves.push((label, window, points));
     }
     let references = references(figure)?;
     let series: Vec<Series> = curves

@@ -388,6 +388,12 @@ impl Collector {
         self.greedy_csv.flush()
     }
 
+    /// How many training episodes the run went through: the last one any agent flew, plus
+    /// one.
+    pub fn trained_episodes(&self) -> u64 {
+        self.train.iter().flatten().map(|flown| flown.span().end).max().unwrap_or(0)
+    }
+
     /// `train[agent][trial]`: the training lengths of each agent in each trial.
     pub fn train_lengths(&self) -> &[Vec<Flown>] {
         &self.train

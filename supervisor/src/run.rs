@@ -171,7 +171,8 @@ fn write_results(
     error: Option<&str>,
 ) -> Result<()> {
     let collector = recorder.collector();
-    let curves = curve::curves(collector.train_lengths(), config.smoothing);
+    let window = curve::window(config.smoothing, collector.trained_episodes());
+    let curves = curve::curves(collector.train_lengths(), window);
     curve::write_csv(&config.out.join("curve.csv"), &curves)?;
     let greedy: Vec<_> = (0..collector.agents()).map(|a| collector.greedy_curve(a)).collect();
     curve::write_greedy_csv(&config.out.join("greedy_curve.csv"), &greedy)?;

@@ -5,6 +5,7 @@
 
 use crate::cli::Transport;
 use crate::config::RunConfig;
+use crate::curve;
 use crate::recorder::Recorder;
 use crate::results::{Flown, GreedyStats};
 use crate::run::Outcome;
@@ -71,7 +72,7 @@ pub fn summary(
         "epsilon": config.params.epsilon,
         "tree": config.tree_text(),
         "tree_file": config.bt_path.as_deref().map(absolute),
-        "smoothing_window": config.smoothing,
+        "smoothing_window": curve::window(config.smoothing, collector.trained_episodes()),
         "eval_every": config.episodes.eval_every,
         "eval_block": (config.episodes.eval_every > 0).then_some(config.episodes.eval_block),
         "restart": restart,
