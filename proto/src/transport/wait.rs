@@ -112,6 +112,7 @@ pub struct Waiter {
     stalls: Cell<u32>,
     first_stall: Cell<Option<Instant>>,
     /// Set by stalled yielding: until then every wait blocks at once (`policy.backoff`).
+    /// Cleared by the first wait after it.
     block_until: Cell<Option<Instant>>,
     run_id: String,
     service: String,
@@ -148,8 +149,11 @@ impl Waiter {
     ) -> Result<T, TransportError> {
         let start = Instant::now();
         self.check_termination(what)?;
-        if self.block_until.get().is_some_and(|until| start < until) {
-            return self.block(what, timeout, start, Duration::ZERO, poll);
+        if let Some(until) = self.block_until.get() {
+            if start < until {
+                return self.block(what, timeout, start, Duration::ZERO, poll);
+            }
+            self.block_until.set(None);
         }
         for _ in 0..self.policy.spins {
             if let Some(found) = poll()? {
@@ -249,9 +253,11 @@ impl Waiter {
         }
     }
 
-    /// For the polls of this waiter's next wait: see [`Overdue`].
+    /// For the polls of this waiter's next wait: see [`Overdue`]. Reads no clock: a backoff
+    /// that has just run out still counts as one (the wait then reads the clock at each poll
+    /// while it yields, once).
     pub fn overdue_after(&self, after: Duration) -> Overdue {
-        let backing_off = self.block_until.get().is_some_and(|until| Instant::now() < until);
+        let backing_off = self.block_until.get().is_some();
         let quick_polls = if backing_off { 0 } else { self.policy.spins + self.policy.yields };
         Overdue { quick_polls, polls: 0, since: None, after }
     }
