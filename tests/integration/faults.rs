@@ -452,21 +452,20 @@ fn an_attached_agent_notices_a_killed_world_at_once_and_keeps_its_tables() {
     ));
     wait_for_agent(&id, 2);
     let world = world_pids(&id);
+    let &[world] = &world[..] else { panic!("run {id} has world processes {world:?}, not one") };
     let attached =
         Spawned::start(AGENT, &["--attach", &id, "--out", &out, "--world-timeout-ms", "600000"]);
     wait_until("UAV3 to fly episodes", Duration::from_secs(30), || {
         std::fs::read_to_string(dir.path().join("episodes.csv"))
             .is_ok_and(|csv| csv.lines().any(|line| line.split(',').nth(1) == Some("3")))
     });
-    for &pid in &world {
-        signal(pid, libc::SIGKILL);
-    }
+    signal(world, libc::SIGKILL);
     let (left, report) = attached.try_finish(WORLD_KILL_BOUND).unwrap_or_else(|overdue| {
         panic!("the attached agent did not notice (within {WORLD_KILL_BOUND:?}):\n{overdue}")
     });
     assert_eq!(left.status.code(), Some(1), "{report}");
     let said = String::from_utf8_lossy(&left.stderr);
-    let gone = format!("the world (process {}) is gone", world[0]);
+    let gone = format!("the world (process {world}) is gone");
     assert!(said.contains(&gone) && said.contains("its Q-tables are saved in"), "{report}");
     for trial in 0..2 {
         let saved = snapshot(dir.path(), 3, trial);
