@@ -285,8 +285,7 @@ fn serve(
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
     // From here on a wait for the world also ends when its process is gone.
-    let waits =
-        WorldWaits { world: SenderNode::of(&first).pid().unwrap_or(0), timeout: world_timeout };
+    let waits = WorldWaits { world: Some(SenderNode::of(&first)), timeout: world_timeout };
     let setup = match setup {
         Some(setup) => setup,
         None => read_run_info(&ports, waits)?,
@@ -338,10 +337,10 @@ fn serve(
 }
 
 /// How an admitted agent waits for the world: for at most `timeout`, and only while its
-/// process `world` lives ([`AgentPorts::wait_on_world`]).
+/// node `world` is there ([`AgentPorts::wait_on_world`]).
 #[derive(Debug, Clone, Copy)]
 struct WorldWaits {
-    world: u32,
+    world: Option<SenderNode>,
     timeout: Duration,
 }
 

@@ -24,9 +24,9 @@ pub use ports::{
     ActionLoan, ActionSample, AgentPorts, FromWorld, ObservationSample, Peers, SenderNode,
     SupervisorPorts, WorldPorts, EPISODE_WAKE_EVERY,
 };
-pub use process::{process_alive, process_of_node, process_stat};
+pub use process::{process_of_node, process_stat};
 pub use root::iceoryx_root;
-pub use run_services::{RunServices, EPISODE_BUFFER, MAX_NODES, SPARE};
+pub use run_services::{DepartedNodes, RunServices, EPISODE_BUFFER, MAX_NODES, SPARE};
 pub use wait::{Overdue, WaitPolicy, Waiter};
 
 use crate::services;
@@ -42,8 +42,8 @@ type Ipc = ipc::Service;
 const WAKE_WORLD: &str = "wake/world";
 const WAKE_AGENTS: &str = "wake/agents";
 const WAKE_SUPERVISOR: &str = "wake/supervisor";
-/// How long a wait for a peer goes on before the waiter looks at whether the peer's process
-/// still exists (`/proc`): rounds take microseconds, and a look costs a few.
+/// How long a wait for a peer goes on before the waiter looks at whether the peer's node is
+/// gone ([`RunServices::departed_nodes`]): rounds take microseconds, and a look costs more.
 pub const LOOK_AT_PROCESSES_AFTER: Duration = Duration::from_millis(20);
 /// Start of every file name a run leaves in `/dev/shm` and under the iceoryx2 root; `.` cannot
 /// occur in a run id, so `flockstep.ab.` never matches the files of run `abc`.
@@ -75,8 +75,8 @@ pub enum TransportError {
     ReportsStalled { run: String, service: String, waited: Duration },
     #[error("run `{run}`: timed out after {waited:?} waiting for {what} (woken by `{service}`)")]
     Timeout { run: String, service: String, what: String, waited: Duration },
-    #[error("run `{run}`: the world (process {pid}) is gone; this agent was waiting for {what}")]
-    WorldGone { run: String, pid: u32, what: String },
+    #[error("run `{run}`: the world ({world}) is gone; this agent was waiting for {what}")]
+    WorldGone { run: String, world: String, what: String },
     #[error("run `{run}`: termination requested while waiting for {what}")]
     Terminated { run: String, what: String },
     #[error("run `{run}`: peers did not connect within {waited:?}: {missing}")]

@@ -7,7 +7,7 @@ use flockstep_proto::services::MAX_RUN_ID;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     cleanup_run, iceoryx_root, leftover_files, sweep_stale_runs, FromWorld, RunConfig, RunServices,
-    SignalMode, SupervisorPorts, TransportError,
+    SenderNode, SignalMode, SupervisorPorts, TransportError,
 };
 use flockstep_proto::{Action, EpisodeReport, Membership, Observation};
 use std::io::BufRead;
@@ -79,44 +79,10 @@ fn an_agent_waits_for_the_world_to_leave() {
     let config = run("world-gone");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
-    let world_process = std::process::id();
-    let stayed = agent.await_world_gone(Duration::from_millis(50), world_process).unwrap();
+    let stayed = agent.await_world_gone(Duration::from_millis(50), None).unwrap();
     assert!(!stayed, "the world is still there");
     drop(world);
-    assert!(agent.await_world_gone(BOUND, world_process).unwrap(), "the world has left");
-}
-
-/// The id of a process that has exited and been reaped.
-fn dead_process() -> u32 {
-    let mut child = std::process::Command::new("true").spawn().expect("spawn `true`");
-    child.wait().expect("reap `true`");
-    child.id()
-}
-
-/// A wait on a world whose process is gone ends within tens of milliseconds, naming the
-/// process and what it waited for, instead of at its deadline; a live world's process
-/// leaves the wait to its deadline. A world killed with SIGKILL leaves its ports behind,
-/// which is what the world's ports kept alive here stand for.
-#[test]
-fn a_wait_on_a_world_whose_process_is_gone_ends_at_once() {
-    let config = run("world-dead");
-    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
-    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
-    let dead = dead_process();
-    let long = Duration::from_secs(60);
-    let started = std::time::Instant::now();
-    let what = format_args!("observation of round {}", 9);
-    let error = agent.wait_on_world(&what, long, dead, || agent.try_observation()).unwrap_err();
-    let text = error.to_string();
-    assert!(matches!(error, TransportError::WorldGone { pid, .. } if pid == dead), "{text}");
-    assert!(text.contains(&format!("process {dead}")) && text.contains("round 9"), "{text}");
-    assert!(started.elapsed() < long / 2, "noticed only after {:?}", started.elapsed());
-    assert!(agent.await_world_gone(long, dead).unwrap(), "its process is gone: so is the world");
-
-    let alive = std::process::id();
-    let waited =
-        agent.wait_on_world(&what, Duration::from_millis(100), alive, || agent.try_observation());
-    assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{waited:?}");
+    assert!(agent.await_world_gone(BOUND, None).unwrap(), "the world has left");
 }
 
 #[test]
@@ -364,9 +330,14 @@ fn child_process() {
         return;
     }
     if role == "world" {
-        let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+        let world = RunServices::create(&config).unwrap().into_world().unwrap();
         println!("child-ready");
-        std::thread::sleep(Duration::from_secs(60));
+        // Rounds for an agent that opens later (a publisher reaches a new subscriber only
+        // as it publishes), until killed.
+        for round in 0..6000 {
+            world.publish_observation(observation(round)).unwrap();
+            std::thread::sleep(Duration::from_millis(10));
+        }
         return;
     }
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
@@ -429,6 +400,54 @@ fn assert_swept(config: &RunConfig, dead_nodes: usize, context: &str) {
     assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (dead_nodes, 0), "{context} {cleaned:?}");
     let after = leftover_files(&config.run_id).unwrap();
     assert!(after.is_empty(), "{context} left behind after clean-up: {after:#?}");
+}
+
+/// A wait on a world whose node is gone (its process killed: a zombie, then reaped) ends
+/// within tens of milliseconds, naming the world's process and what it waited for, instead
+/// of at its deadline; a live world, or one stopped with SIGSTOP (a Ctrl-Z pauses the whole
+/// run), leaves the wait to its deadline.
+#[test]
+fn a_wait_on_a_world_that_is_gone_ends_at_once() {
+    let _sweeps = dead_nodes_lock();
+    let config = run("world-dead");
+    let (mut world, _, _) = spawn_child(&config, "world");
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let first =
+        agent.waiter().wait(&"the world's observation", BOUND, || agent.try_observation()).unwrap();
+    let node = SenderNode::of(&first);
+    assert_eq!(node.pid(), Some(world.id()), "the observation names its sender");
+    let what = format_args!("observation of round {}", 9);
+    let short = Duration::from_millis(100);
+    let wait_on = |world, timeout| agent.wait_on_world(&what, timeout, world, || Ok(None::<()>));
+    for (state, signal) in [("live", libc::SIGCONT), ("stopped", libc::SIGSTOP)] {
+        // SAFETY: signalling our own child by pid.
+        assert_eq!(unsafe { libc::kill(world.id() as libc::pid_t, signal) }, 0);
+        let waited = wait_on(Some(node), short);
+        assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{state}: {waited:?}");
+    }
+    world.kill().unwrap();
+    let long = Duration::from_secs(60);
+    for state in ["a zombie", "reaped"] {
+        let started = std::time::Instant::now();
+        let error = wait_on(Some(node), long).unwrap_err();
+        let text = error.to_string();
+        let named = format!("the world (process {}) is gone", world.id());
+        assert!(matches!(error, TransportError::WorldGone { .. }), "{state}: {text}");
+        assert!(text.contains(&named) && text.contains("round 9"), "{state}: {text}");
+        assert!(started.elapsed() < long / 2, "{state}: noticed after {:?}", started.elapsed());
+        assert!(agent.await_world_gone(long, Some(node)).unwrap(), "{state}: the world is gone");
+        if state == "a zombie" {
+            world.wait().unwrap();
+        }
+    }
+    let unknown = wait_on(None, short);
+    assert!(matches!(unknown, Err(TransportError::Timeout { .. })), "{unknown:?}");
+    // The last node out may have cleaned the world's dead node already.
+    drop((first, agent));
+    let cleaned = cleanup_run(&config.run_id).unwrap();
+    assert_eq!(cleaned.live_nodes, 0, "{cleaned:?}");
+    let after = leftover_files(&config.run_id).unwrap();
+    assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
 }
 
 /// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.

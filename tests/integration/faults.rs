@@ -478,6 +478,64 @@ fn an_attached_agent_notices_a_killed_world_at_once_and_keeps_its_tables() {
     assert_nothing_left(&id);
 }
 
+/// The rows of `episodes.csv` in `dir` flown by UAV`uav` so far.
+fn rows_of(dir: &std::path::Path, uav: u64) -> usize {
+    let csv = std::fs::read_to_string(dir.join("episodes.csv")).unwrap_or_default();
+    csv.lines().filter(|line| line.split(',').nth(1) == Some(&uav.to_string())).count()
+}
+
+/// An agent in a pid namespace of its own (a container that shares `/dev/shm` with the run)
+/// sees the world's process id as nothing or as another process: whether the world is gone
+/// is asked of iceoryx2, whose node locks hold across namespaces. It used to look the pid up
+/// in `/proc` and, at the first round slower than 20 ms, leave saying the world was gone.
+/// Skipped where `unshare --pid` is not allowed (it needs privileges).
+#[test]
+fn an_agent_in_another_pid_namespace_outlasts_a_slow_round() {
+    let unshare = ["--pid", "--fork", "--mount-proc"];
+    let allowed = std::process::Command::new("unshare")
+        .args(unshare)
+        .arg("true")
+        .output()
+        .is_ok_and(|output| output.status.success());
+    if !allowed {
+        eprintln!("skipped: `unshare --pid --fork --mount-proc true` failed here");
+        return;
+    }
+    let dir = scratch();
+    let (id, out) = (run_id("pidns"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s4 --uavs 2 --episodes 1000000 --trials 1 --seed 44"),
+    ));
+    let uav1 = wait_for_agent(&id, 1);
+    let attached = Spawned::start(
+        "unshare",
+        &[&unshare[..], &[AGENT, "--attach", &id, "--out", &out, "--world-timeout-ms", "60000"]]
+            .concat(),
+    );
+    wait_until("UAV3 to fly episodes", Duration::from_secs(30), || rows_of(dir.path(), 3) > 0);
+    // A round of 300 ms: UAV1 stopped, well within its 500 ms deadline.
+    for signal_to_send in [libc::SIGSTOP, libc::SIGCONT] {
+        for &pid in &uav1 {
+            signal(pid, signal_to_send);
+        }
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    let flown = rows_of(dir.path(), 3);
+    wait_until("UAV3 to fly on after the slow round", Duration::from_secs(30), || {
+        rows_of(dir.path(), 3) > flown + 100
+    });
+    run.interrupt();
+    let (left, report) = attached.finish(DEADLOCK);
+    assert!(left.status.success(), "{report}");
+    let said = String::from_utf8_lossy(&left.stderr);
+    assert!(said.contains(&format!("agent: run `{id}` ended")), "{report}");
+    let (status, report) = run.finish(DEADLOCK);
+    assert_eq!(status.status.code(), Some(130), "{report}");
+    assert_nothing_left(&id);
+}
+
 /// The path of agent `uav`'s (1-based) snapshot of `trial` under results directory `dir`.
 fn snapshot_file(dir: &std::path::Path, uav: usize, trial: usize) -> std::path::PathBuf {
     dir.join("qtables").join(format!("uav{uav}_trial{trial}.bin"))

@@ -14,8 +14,8 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    exit_with_parent, process_alive, process_stat, RunConfig, RunServices, SenderNode, SignalMode,
-    TransportError, WorldPorts, LOOK_AT_PROCESSES_AFTER,
+    exit_with_parent, process_stat, RunConfig, RunServices, SenderNode, SignalMode, TransportError,
+    WorldPorts, LOOK_AT_PROCESSES_AFTER,
 };
 use flockstep_proto::{
     slots_in, JoinRequest, Membership, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -497,8 +497,9 @@ impl WorldNode {
                     return Ok(Some(()));
                 }
                 if overdue.check() {
+                    let departed = ports.services().departed_nodes();
                     answers.gone = slots_in(missing)
-                        .filter(|&s| !process_alive(members.pid(s)))
+                        .filter(|&s| members.nodes[s].is_some_and(|node| departed.includes(node)))
                         .fold(0, |m, s| m | 1 << s);
                     if answers.gone == missing {
                         return Ok(Some(()));

@@ -3,8 +3,8 @@
 //! event.
 
 use super::{
-    process_alive, termination_requested, Ipc, RunServices, TransportError, Waiter,
-    LOOK_AT_PROCESSES_AFTER, WAKE_AGENTS, WAKE_SUPERVISOR, WAKE_WORLD,
+    termination_requested, Ipc, RunServices, TransportError, Waiter, LOOK_AT_PROCESSES_AFTER,
+    WAKE_AGENTS, WAKE_SUPERVISOR, WAKE_WORLD,
 };
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
@@ -45,6 +45,11 @@ impl SenderNode {
     #[inline]
     pub fn of<T: Debug + ZeroCopySend>(sample: &Sample<Ipc, T, ()>) -> SenderNode {
         SenderNode(sample.header().node_id())
+    }
+
+    /// The node's id, as iceoryx2 lists it.
+    pub fn id(&self) -> u128 {
+        self.0.value()
     }
 
     /// The process that created the node (iceoryx2 builds the id from it).
@@ -506,41 +511,51 @@ impl AgentPorts {
         &self.waiter
     }
 
-    /// Waits for `poll` as [`Waiter::wait`] does, and also ends once the world's process
-    /// (`world`, from [`SenderNode::pid`] of an observation; 0 if unknown) is gone, with
-    /// [`TransportError::WorldGone`]. It looks at the process once the wait has lasted
-    /// [`LOOK_AT_PROCESSES_AFTER`], so a world killed with SIGKILL is noticed within tens of
-    /// milliseconds instead of at `timeout` (`--world-timeout-ms`, 30 s): the supervisor
-    /// brings down the agents it started, but an attached agent has only this.
+    /// Waits for `poll` as [`Waiter::wait`] does, and also ends once the world's node
+    /// (`world`, the [`SenderNode`] of an observation; None if unknown) is gone, with
+    /// [`TransportError::WorldGone`]. It looks for the node once the wait has lasted
+    /// [`LOOK_AT_PROCESSES_AFTER`] ([`RunServices::departed_nodes`]), so a world killed with
+    /// SIGKILL is noticed within tens of milliseconds instead of at `timeout`
+    /// (`--world-timeout-ms`, 30 s): the supervisor brings down the agents it started, but an
+    /// attached agent has only this.
     pub fn wait_on_world<T>(
         &self,
         what: &dyn std::fmt::Display,
         timeout: Duration,
-        world: u32,
+        world: Option<SenderNode>,
         mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
     ) -> Result<T, TransportError> {
         let mut overdue = self.waiter.overdue_after(LOOK_AT_PROCESSES_AFTER);
         self.waiter.wait(what, timeout, || {
             let found = poll()?;
-            if found.is_none() && overdue.check() && !process_alive(world) {
-                return Err(TransportError::WorldGone {
-                    run: self.run_id().to_owned(),
-                    pid: world,
-                    what: what.to_string(),
-                });
+            if let Some(world) = world.filter(|_| found.is_none() && overdue.check()) {
+                if self.services.departed_nodes().includes(world) {
+                    let process = world
+                        .pid()
+                        .map_or("process unknown".into(), |pid| format!("process {pid}"));
+                    return Err(TransportError::WorldGone {
+                        run: self.run_id().to_owned(),
+                        world: process,
+                        what: what.to_string(),
+                    });
+                }
             }
             Ok(found)
         })
     }
 
-    /// Waits until the world has left the run (its observation publisher or its process
-    /// `world`, as in [`Self::wait_on_world`], is gone), at most `timeout`, or until this
-    /// process is asked to terminate; true if the world left. An agent's answer to the stop
+    /// Waits until the world has left the run (its observation publisher or its node `world`,
+    /// as in [`Self::wait_on_world`], is gone), at most `timeout`, or until this process is
+    /// asked to terminate; true if the world left. An agent's answer to the stop
     /// round is its last sample, and a process that ended right after sending it lost it
     /// now and then (a Ctrl-C at start-up failed about one run in seven with the world
     /// waiting for a stop answer from an agent already gone): an agent leaves after the
     /// world, which reads every answer before it ends.
-    pub fn await_world_gone(&self, timeout: Duration, world: u32) -> Result<bool, TransportError> {
+    pub fn await_world_gone(
+        &self,
+        timeout: Duration,
+        world: Option<SenderNode>,
+    ) -> Result<bool, TransportError> {
         let observations = &self.services.observations;
         let gone = || Ok((observations.dynamic_config().number_of_publishers() == 0).then_some(()));
         match self.wait_on_world(&"the world to leave", timeout, world, gone) {

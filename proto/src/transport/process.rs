@@ -1,22 +1,13 @@
-//! What `/proc` says about the processes of a run. Each process of a run has one iceoryx2
-//! node whose id carries the process id, so a process can tell whether a silent peer still
-//! exists instead of waiting out its deadline: the world looks at the agents it waits for,
-//! an agent at the world. The processes of a run share one pid namespace, as they share
-//! `/dev/shm`.
+//! What `/proc` says about a process: which process made an iceoryx2 node (its id carries
+//! the process id), whether a process id is still taken, and a process's parent. Whether a
+//! run's peer is gone is not asked here but of iceoryx2 ([`super::RunServices::departed_nodes`]):
+//! a process id means nothing in another pid namespace, and a run's processes need not share
+//! one.
 
 /// The id of the process that created the node `node_id` (iceoryx2 builds the id from it);
 /// also the name of the node's directory.
 pub fn process_of_node(node_id: u128) -> u32 {
     (node_id >> 64) as u32
-}
-
-/// Whether process `pid` exists and is not a zombie (a killed child stays a zombie until its
-/// parent reaps it). Pid 0 (unknown) counts as alive: a deadline decides then.
-pub fn process_alive(pid: u32) -> bool {
-    if pid == 0 {
-        return true;
-    }
-    process_stat(pid).is_some_and(|fields| fields.first().is_some_and(|s| s != "Z" && s != "X"))
 }
 
 /// The fields of `/proc/<pid>/stat` after the command name (state, parent pid, ...); the
@@ -39,23 +30,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_live_process_is_alive_and_its_stat_names_its_parent() {
+    fn a_live_process_exists_and_its_stat_names_its_parent() {
         let fields = process_stat(std::process::id()).expect("this process has a stat file");
         assert_eq!(fields[1], std::os::unix::process::parent_id().to_string(), "{fields:?}");
-        assert!(process_alive(std::process::id()));
         assert!(process_exists(std::process::id()));
-        assert!(process_alive(0), "an unknown pid is left to the deadline");
         assert!(process_stat(u32::MAX).is_none(), "no such process");
-        assert!(!process_alive(u32::MAX) && !process_exists(u32::MAX));
+        assert!(!process_exists(u32::MAX));
     }
 
     #[test]
-    fn a_zombie_exists_but_is_not_alive() {
+    fn a_zombies_id_is_taken_until_it_is_reaped() {
         let mut child = std::process::Command::new("true").spawn().expect("spawn `true`");
         let pid = child.id();
         // Not reaped: once it has exited it stays a zombie. Bounded: `true` exits at once.
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        while process_alive(pid) {
+        while process_stat(pid).is_some_and(|fields| fields[0] != "Z") {
             assert!(std::time::Instant::now() < deadline, "`true` (process {pid}) did not exit");
             std::thread::sleep(std::time::Duration::from_millis(1));
         }

@@ -1,13 +1,14 @@
 //! The run's services: their limits and QoS, created by the world or opened by the others.
 
 use super::{
-    setup, termination_requested, Ipc, RunConfig, RunNode, TransportError, WAKE_AGENTS,
+    setup, termination_requested, Ipc, RunConfig, RunNode, SenderNode, TransportError, WAKE_AGENTS,
     WAKE_SUPERVISOR, WAKE_WORLD,
 };
 use crate::limits::MAX_AGENTS;
 use crate::services::{self, ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
 use crate::supervisor_to_world::Control;
 use crate::{Action, EpisodeBatch, JoinRequest, Observation, RunInfo, EPISODE_BATCH};
+use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::{EventCreateError, EventOpenError};
 use iceoryx2::service::builder::publish_subscribe::{
@@ -267,12 +268,51 @@ impl RunServices {
         .map_err(|e| setup(run_id, "looking for the run's services", e))
     }
 
+    /// Which nodes of this run are gone, as iceoryx2 sees them: a node's process holds a lock
+    /// on its monitor file while it lives, and the system releases it as the process ends
+    /// (crashed or killed, reaped or not; a stopped process keeps it), and a node whose
+    /// resources were removed is no longer listed. Unlike a look at `/proc`, this holds across
+    /// pid namespaces, since the run's processes share its files. Listing reads each node's
+    /// monitor (µs each): for a peer silent for a while, not for every poll.
+    pub fn departed_nodes(&self) -> DepartedNodes {
+        let mut listed = Vec::new();
+        let complete = Node::<Ipc>::list(self.node.node().config(), |state| {
+            let entry = match &state {
+                NodeState::Alive(node) => (node.id().value(), false),
+                NodeState::Dead(node) => (node.id().value(), true),
+                NodeState::Inaccessible(id) | NodeState::Undefined(id) => (id.value(), false),
+            };
+            listed.push(entry);
+            CallbackProgression::Continue
+        })
+        .is_ok();
+        DepartedNodes { listed, complete }
+    }
+
     /// Removes the resources of dead nodes of this run (a crashed agent's ports). Returns how
     /// many nodes were cleaned up.
     pub fn cleanup_dead_nodes(&self) -> u64 {
         // First what iceoryx2 would wait on for good; failing that, it still cleans the rest.
         let _ = super::cleanup::remove_empty_segments(self.run_id());
         self.node.node().try_cleanup_dead_nodes().cleanups
+    }
+}
+
+/// The nodes of a run at one look ([`RunServices::departed_nodes`]).
+#[derive(Debug)]
+pub struct DepartedNodes {
+    /// Each listed node's id, and whether it is dead.
+    listed: Vec<(u128, bool)>,
+    /// Whether every node could be listed; if not, none counts as departed.
+    complete: bool,
+}
+
+impl DepartedNodes {
+    /// Whether `node` is gone: listed dead, or no longer listed. A node whose state could not
+    /// be read counts as present: a deadline decides then.
+    pub fn includes(&self, node: SenderNode) -> bool {
+        self.complete
+            && self.listed.iter().find(|(id, _)| *id == node.id()).is_none_or(|&(_, dead)| dead)
     }
 }
 
