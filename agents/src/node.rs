@@ -333,8 +333,24 @@ fn serve(
         ));
         return Ok(());
     }
-    bail!("{error:#}; its Q-tables are saved in {}", dir.display())
+    let said = format!("{error:#}; its Q-tables are saved in {}", dir.display());
+    if matches!(error.downcast_ref::<TransportError>(), Some(TransportError::WorldGone { .. })) {
+        return Err(WorldGone(said).into());
+    }
+    bail!(said)
 }
+
+/// The exit status of an agent that left because the world's node was gone. Once the world
+/// has exited too, the supervisor takes it for a consequence of the world's end: it neither
+/// blames the agent for the run's failure nor restarts it. Without it, a supervisor that
+/// looked at its children late (stopped, or busy) found these agents failed first.
+pub const EXIT_WORLD_GONE: u8 = 3;
+
+/// The error of an agent that left because the world was gone (exit status
+/// [`EXIT_WORLD_GONE`]); its tables are saved.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct WorldGone(String);
 
 /// How an admitted agent waits for the world: for at most `timeout`, and only while its
 /// node `world` is there ([`AgentPorts::wait_on_world`]).

@@ -22,6 +22,7 @@ use crate::recorder::Recorder;
 use crate::run::Outcome;
 use crate::suspend::SuspendOnCtrlZ;
 use anyhow::{bail, Context, Result};
+use flockstep_agents::node::EXIT_WORLD_GONE;
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
@@ -471,8 +472,10 @@ impl Fleet<'_> {
 
     /// The agent processes that failed since the last call, with their slot and a note
     /// naming the process and how it ended: its exit and last words, or, for one brought
-    /// down because the world dropped it, that.
+    /// down because the world dropped it, that. One that left because the world was gone
+    /// ([`EXIT_WORLD_GONE`]) did not fail once the world has ended.
     fn newly_failed_agents(&mut self) -> Result<Vec<(usize, String)>> {
+        let world_ended = self.world.status()?.is_some();
         let mut failed = Vec::new();
         for AgentProcess { process, slot, noted, .. } in &mut self.agents {
             let Some(status) = process.status()? else { continue };
@@ -480,6 +483,10 @@ impl Fleet<'_> {
                 continue;
             }
             *noted = true;
+            // It left because the world had: the world's end is the news.
+            if world_ended && status.code() == Some(EXIT_WORLD_GONE.into()) {
+                continue;
+            }
             let note = if process.brought_down() {
                 format!(
                     "{} was dropped by the world: silent past the deadline (--agent-timeout-ms \

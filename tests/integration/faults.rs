@@ -7,6 +7,7 @@ use crate::harness::{
     first_gap, mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
     wait_for_agent, wait_for_records, wait_until, words, world_log, world_pids, Spawned, AGENT,
 };
+use flockstep_agents::node::EXIT_WORLD_GONE;
 use flockstep_agents::snapshot::Snapshot;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
@@ -463,7 +464,7 @@ fn an_attached_agent_notices_a_killed_world_at_once_and_keeps_its_tables() {
     let (left, report) = attached.try_finish(WORLD_KILL_BOUND).unwrap_or_else(|overdue| {
         panic!("the attached agent did not notice (within {WORLD_KILL_BOUND:?}):\n{overdue}")
     });
-    assert_eq!(left.status.code(), Some(1), "{report}");
+    assert_eq!(left.status.code(), Some(EXIT_WORLD_GONE.into()), "{report}");
     let said = String::from_utf8_lossy(&left.stderr);
     let gone = format!("the world (process {world}) is gone");
     assert!(said.contains(&gone) && said.contains("its Q-tables are saved in"), "{report}");
@@ -475,6 +476,51 @@ fn an_attached_agent_notices_a_killed_world_at_once_and_keeps_its_tables() {
         panic!("the supervisor did not end at once (within {WORLD_KILL_BOUND:?}):\n{overdue}")
     });
     assert_eq!(status.status.code(), Some(1), "{report}");
+    assert_nothing_left(&id);
+}
+
+/// Agents that left because the world was gone are not what failed the run, even when the
+/// supervisor sees them gone before it sees the world (here it is stopped meanwhile, as a
+/// busy or paused supervisor would be late): the error names the world alone, no agent
+/// failure is noted and none is restarted. Before, the run's error said "first to fail:
+/// UAV1 ... the world is gone", and `--restart on-failure` could restart it.
+#[test]
+fn agents_that_leave_a_killed_world_are_not_blamed_or_restarted() {
+    let dir = scratch();
+    let (id, out) = (run_id("worldgone"), dir.path().display().to_string());
+    let run = Spawned::supervisor(&run_args(
+        &id,
+        &out,
+        &words("--scenario s3 --uavs 2 --episodes 1000000 --trials 2 --restart on-failure"),
+    ));
+    let agents: Vec<u32> = (1..=2).flat_map(|uav| wait_for_agent(&id, uav)).collect();
+    wait_for_records(&dir.path().join("episodes.csv"), 1000, DEADLOCK);
+    signal(run.pid(), libc::SIGSTOP);
+    for pid in world_pids(&id) {
+        signal(pid, libc::SIGKILL);
+    }
+    // Both agents leave by themselves; their parent, stopped, has not reaped them.
+    wait_until("both agents to leave the killed world", Duration::from_secs(30), || {
+        agents.iter().all(|&pid| process_state(pid).is_none_or(|state| state == 'Z'))
+    });
+    signal(run.pid(), libc::SIGCONT);
+    let (status, report) = run.try_finish(WORLD_KILL_BOUND).unwrap_or_else(|overdue| {
+        panic!("the supervisor did not end at once (within {WORLD_KILL_BOUND:?}):\n{overdue}")
+    });
+    assert_eq!(status.status.code(), Some(1), "{report}");
+    let stderr = String::from_utf8_lossy(&status.stderr);
+    let error = stderr.lines().last().unwrap_or_default();
+    assert!(error.contains("the world process failed"), "{report}");
+    assert!(!error.contains("first to fail"), "an agent is blamed:\n{report}");
+    let s = summary(dir.path());
+    let notes = notes(&s);
+    let blamed = |note: &&str| note.starts_with("UAV") || note.contains("restarted");
+    assert!(!notes.iter().any(blamed), "{notes:?}");
+    for uav in 1..=2 {
+        let log = String::from_utf8_lossy(&read(&dir.path().join(format!("logs/uav{uav}.log"))))
+            .into_owned();
+        assert!(log.contains("is gone") && log.contains("its Q-tables are saved in"), "{log}");
+    }
     assert_nothing_left(&id);
 }
 
