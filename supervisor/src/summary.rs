@@ -54,7 +54,8 @@ pub fn summary(
         "run_id": config.run_id,
         "transport": format!("{:?}", config.transport).to_lowercase(),
         "complete": outcome.complete,
-        "every_agent_flew_every_episode": every_agent_flew_every_episode(config, recorder, &greedy),
+        "every_agent_flew_every_episode":
+            every_agent_flew_every_episode(config, recorder, &greedy, outcome.complete),
         "notes": notes,
         "peak_rss_kib": outcome.peak_rss_kib.iter().map(|(name, kib)| json!({ "process": name, "kib": kib })).collect::<Vec<_>>(),
         "scenario": config.scenario_arg,
@@ -107,23 +108,34 @@ fn absolute(path: &Path) -> String {
 }
 
 /// Whether every agent the run started flew every training and greedy episode of every
-/// trial. A run that lost an agent, for good or until its restart, may still have run to
-/// its end (`complete`); its results are then those of fewer agents for a while, which this
-/// says without reading `notes`.
+/// trial: of the run's plan if it is `complete`, else of those the run flew before it was
+/// stopped (as many as any agent it started flew). A run that lost an agent, for good or
+/// until its restart, may still have run to its end; its results are then those of fewer
+/// agents for a while, which this says without reading `notes`.
 fn every_agent_flew_every_episode(
     config: &RunConfig,
     recorder: &Recorder,
     greedy: &[Option<GreedyStats>],
+    complete: bool,
 ) -> bool {
     let lengths = recorder.collector().train_lengths();
+    let trained = |slot: usize, trial: usize| {
+        lengths.get(slot).and_then(|trials| trials.get(trial)).map_or(0, |f| f.len() as u64)
+    };
+    // The evaluation after training (the periodic blocks are on the greedy curve).
+    let evaluated =
+        |slot: usize| greedy.get(slot).and_then(Option::as_ref).map_or(0, |g| g.episodes);
+    let started = 0..config.uavs;
     let e = &config.episodes;
-    (0..config.uavs).all(|slot| {
-        let trials = lengths.get(slot).map_or(&[][..], Vec::as_slice);
-        let trained = trials.len() == config.trials
-            && trials.iter().all(|flown| flown.len() as u64 == e.train_episodes);
-        // The evaluation after training (the periodic blocks are on the greedy curve).
-        let evaluated = greedy.get(slot).and_then(Option::as_ref).map_or(0, |g| g.episodes);
-        trained && evaluated == e.eval_episodes * config.trials as u64
+    let (train_plan, eval_plan): (Vec<u64>, u64) = if complete {
+        (vec![e.train_episodes; config.trials], e.eval_episodes * config.trials as u64)
+    } else {
+        let most = |trial| started.clone().map(|slot| trained(slot, trial)).max().unwrap_or(0);
+        ((0..config.trials).map(most).collect(), started.clone().map(evaluated).max().unwrap_or(0))
+    };
+    started.clone().all(|slot| {
+        (0..config.trials).all(|trial| trained(slot, trial) == train_plan[trial])
+            && evaluated(slot) == eval_plan
     })
 }
 

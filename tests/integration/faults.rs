@@ -378,6 +378,8 @@ fn ctrl_c_stops_cleanly_with_partial_results() {
         // episodes it planned.
         let trained = rows.iter().map(|row| row[2] + 1).max().unwrap_or(0);
         assert_eq!(s["smoothing_window"], (trained / 100).max(1), "attempt {attempt}: {s:#}");
+        // No agent was lost: each flew every episode the run flew before it stopped.
+        assert_eq!(s["every_agent_flew_every_episode"], true, "attempt {attempt}: {s:#}");
         let rounds = s["rounds"].as_u64().unwrap_or_else(|| panic!("no rounds in {s:#}"));
         if rounds > 0 {
             with_tables += 1;
