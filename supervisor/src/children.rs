@@ -143,14 +143,21 @@ impl Process {
         self.signal(libc::SIGCONT);
     }
 
-    /// The last error line the process logged (or its last line), for error messages.
+    /// The last error line the process logged (or its last line), for error messages. A
+    /// process killed by a signal did not get to say why: its last line, if not an error,
+    /// is whatever it logged last, and is not offered as a reason.
     pub fn last_words(&self) -> String {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();
         let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
-        lines.iter().rev().find(|l| l.contains("error")).or(lines.last()).map_or_else(
-            || format!("no output; see {}", self.log.display()),
-            |l| l.trim().to_string(),
-        )
+        let killed = self
+            .status
+            .is_some_and(|status| std::os::unix::process::ExitStatusExt::signal(&status).is_some());
+        let last = lines.last().filter(|_| !killed);
+        match lines.iter().rev().find(|l| l.contains("error")).or(last) {
+            Some(line) => line.trim().to_string(),
+            None if killed => format!("killed, with no error in its log ({})", self.log.display()),
+            None => format!("no output; see {}", self.log.display()),
+        }
     }
 
     fn signal(&self, signal: libc::c_int) {
