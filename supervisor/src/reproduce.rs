@@ -53,6 +53,7 @@ pub fn reproduce(
             return Ok(false);
         }
         let points = read_smoothed(&config.out.join("curve.csv"), 1)?;
+        // Complete, it trained every planned episode: its curve's window (`run.rs`).
         let window = curve::window(config.smoothing, config.episodes.train_episodes);
         curves.push((label, window, points));
     }

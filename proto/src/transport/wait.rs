@@ -472,4 +472,47 @@ mod tests {
         let yielded = after_stalled_yielding("too-few", STALLS_TO_BACK_OFF - 1, long);
         assert_eq!(yielded.expect("too few stalls: found while yielding"), 3);
     }
+
+    /// How many polls it takes until [`Overdue::check`] says overdue, polling every 1 ms.
+    fn polls_until_overdue(mut overdue: Overdue) -> u32 {
+        for polls in 1..=1000 {
+            if overdue.check() {
+                return polls;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        panic!("not overdue after 1000 polls of 1 ms")
+    }
+
+    /// [`Overdue`] lets a waiter's counted polls pass, which a backing-off waiter does not
+    /// make: it then times from the first poll. Once the backoff has run out, the next wait
+    /// clears it, and the counted polls are made (and let pass) again.
+    #[test]
+    fn overdue_lets_pass_the_polls_the_waiter_counts() {
+        let (long, backoff, yields) = (Duration::from_secs(60), Duration::from_millis(50), 20);
+        let policy = WaitPolicy { yields, yield_for: long, slice: long, backoff, spins: 0 };
+        let ports = world_waiting_with("overdue", policy);
+        let waiter = ports.waiter();
+        // Overdue (`after` zero) at the first poll that reads the clock, or the one after.
+        let counted = |polls: u32| polls > yields;
+        let polls = polls_until_overdue(waiter.overdue_after(Duration::ZERO));
+        assert!(counted(polls), "overdue after {polls} polls: the counted ones were not let pass");
+        for _ in 0..STALLS_TO_BACK_OFF {
+            let mut polls = 0u32;
+            let stalled = waiter.wait(&"a stalled answer", Duration::from_secs(5), || {
+                polls += 1;
+                if polls == 1 {
+                    std::thread::sleep(STALLED_YIELDING * 2);
+                }
+                Ok((polls == 2).then_some(()))
+            });
+            stalled.expect("found after one yield");
+        }
+        let polls = polls_until_overdue(waiter.overdue_after(Duration::ZERO));
+        assert!(polls <= 2, "backing off, overdue only after {polls} polls");
+        std::thread::sleep(backoff * 2);
+        waiter.wait(&"an answer", Duration::from_secs(5), || Ok(Some(()))).expect("found");
+        let polls = polls_until_overdue(waiter.overdue_after(Duration::ZERO));
+        assert!(counted(polls), "the backoff ran out, yet overdue after {polls} polls");
+    }
 }
