@@ -284,7 +284,7 @@ fn serve(
     }
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
-    // From here on a wait for the world also ends when its process is gone.
+    // From here on a wait for the world also ends when the world is gone.
     let waits = WorldWaits { world: Some(SenderNode::of(&first)), timeout: world_timeout };
     let setup = match setup {
         Some(setup) => setup,

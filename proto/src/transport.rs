@@ -44,7 +44,7 @@ const WAKE_AGENTS: &str = "wake/agents";
 const WAKE_SUPERVISOR: &str = "wake/supervisor";
 /// How long a wait for a peer goes on before the waiter looks at whether the peer's node is
 /// gone ([`RunServices::departed_nodes`]): rounds take microseconds, and a look costs more.
-pub const LOOK_AT_PROCESSES_AFTER: Duration = Duration::from_millis(20);
+pub const LOOK_FOR_GONE_PEERS_AFTER: Duration = Duration::from_millis(20);
 /// Start of every file name a run leaves in `/dev/shm` and under the iceoryx2 root; `.` cannot
 /// occur in a run id, so `flockstep.ab.` never matches the files of run `abc`.
 const PREFIX_HEAD: &str = "flockstep.";

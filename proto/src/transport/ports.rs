@@ -3,7 +3,7 @@
 //! event.
 
 use super::{
-    termination_requested, Ipc, RunServices, TransportError, Waiter, LOOK_AT_PROCESSES_AFTER,
+    termination_requested, Ipc, RunServices, TransportError, Waiter, LOOK_FOR_GONE_PEERS_AFTER,
     WAKE_AGENTS, WAKE_SUPERVISOR, WAKE_WORLD,
 };
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
@@ -514,7 +514,7 @@ impl AgentPorts {
     /// Waits for `poll` as [`Waiter::wait`] does, and also ends once the world's node
     /// (`world`, the [`SenderNode`] of an observation; None if unknown) is gone, with
     /// [`TransportError::WorldGone`]. It looks for the node once the wait has lasted
-    /// [`LOOK_AT_PROCESSES_AFTER`] ([`RunServices::departed_nodes`]), so a world killed with
+    /// [`LOOK_FOR_GONE_PEERS_AFTER`] ([`RunServices::departed_nodes`]), so a world killed with
     /// SIGKILL is noticed within tens of milliseconds instead of at `timeout`
     /// (`--world-timeout-ms`, 30 s): the supervisor brings down the agents it started, but an
     /// attached agent has only this.
@@ -525,7 +525,7 @@ impl AgentPorts {
         world: Option<SenderNode>,
         mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
     ) -> Result<T, TransportError> {
-        let mut overdue = self.waiter.overdue_after(LOOK_AT_PROCESSES_AFTER);
+        let mut overdue = self.waiter.overdue_after(LOOK_FOR_GONE_PEERS_AFTER);
         self.waiter.wait(what, timeout, || {
             let found = poll()?;
             if let Some(world) = world.filter(|_| found.is_none() && overdue.check()) {
