@@ -71,7 +71,7 @@ pub fn main(args: impl IntoIterator<Item = std::ffi::OsString>) -> std::process:
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             flockstep_proto::output::message(&format!("agent: error: {e:#}"));
-            if e.downcast_ref::<crate::node::WorldGone>().is_some() {
+            if crate::node::world_gone(&e) {
                 std::process::ExitCode::from(crate::node::EXIT_WORLD_GONE)
             } else {
                 std::process::ExitCode::FAILURE

@@ -22,7 +22,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use flockstep_proto::transport::{
     exit_with_parent, termination_requested, ActionLoan, AgentPorts, ObservationSample, RunConfig,
-    RunServices, SenderNode, SignalMode, TransportError,
+    RunServices, SignalMode, TransportError,
 };
 use flockstep_proto::{
     FieldError, JoinRequest, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -284,23 +284,21 @@ fn serve(
     }
     let nonce = join_nonce();
     let (slot, first) = await_admission(&ports, ask, nonce, world_timeout)?;
-    // From here on a wait for the world also ends when the world is gone.
-    let waits = WorldWaits { world: Some(SenderNode::of(&first)), timeout: world_timeout };
     let setup = match setup {
         Some(setup) => setup,
-        None => read_run_info(&ports, waits)?,
+        None => read_run_info(&ports, world_timeout)?,
     };
     let mut session = Session::new(slot, &setup, tree, learner, out)?;
     tracing::info!(uav = slot + 1, "admitted");
     let mut trace = learner.trace.as_deref().map(Trace::create).transpose()?;
-    let flown = fly(&ports, &mut session, first, nonce, &faults, waits, trace.as_mut());
+    let flown = fly(&ports, &mut session, first, nonce, &faults, world_timeout, trace.as_mut());
     let error = match flown {
         // The stop round is answered once the final tables are on disk: the world takes no
         // answer for a sign they are lost.
         Ok(stop_answer) => {
             session.save_all()?;
             stop_answer.send()?;
-            if !ports.await_world_gone(waits.timeout, waits.world)? && !termination_requested() {
+            if !ports.await_world_gone(world_timeout)? && !termination_requested() {
                 tracing::warn!("the world did not leave after the stop round; leaving anyway");
             }
             if ask != Ask::Own(slot) {
@@ -334,10 +332,17 @@ fn serve(
         return Ok(());
     }
     let said = format!("{error:#}; its Q-tables are saved in {}", dir.display());
-    if matches!(error.downcast_ref::<TransportError>(), Some(TransportError::WorldGone { .. })) {
+    if world_gone(&error) {
         return Err(WorldGone(said).into());
     }
     bail!(said)
+}
+
+/// Whether `error` ended an agent because the world was gone: after admission
+/// ([`WorldGone`]) or before it (the transport's error as it is).
+pub fn world_gone(error: &anyhow::Error) -> bool {
+    error.downcast_ref::<WorldGone>().is_some()
+        || matches!(error.downcast_ref::<TransportError>(), Some(TransportError::WorldGone { .. }))
 }
 
 /// The exit status of an agent that left because the world's node was gone. Once the world
@@ -352,14 +357,6 @@ pub const EXIT_WORLD_GONE: u8 = 3;
 #[error("{0}")]
 pub struct WorldGone(String);
 
-/// How an admitted agent waits for the world: for at most `timeout`, and only while its
-/// node `world` is there ([`AgentPorts::wait_on_world`]).
-#[derive(Debug, Clone, Copy)]
-struct WorldWaits {
-    world: Option<SenderNode>,
-    timeout: Duration,
-}
-
 /// Answers every round from `first` (the round that admitted the agent) up to the stop
 /// round, whose answer it returns unsent: it goes out once the final snapshots are written.
 fn fly<'a>(
@@ -368,7 +365,7 @@ fn fly<'a>(
     first: ObservationSample,
     nonce: u64,
     faults: &[Fault],
-    waits: WorldWaits,
+    world_timeout: Duration,
     mut trace: Option<&mut Trace>,
 ) -> Result<ActionLoan<'a>> {
     let slot = session.agent.slot();
@@ -379,8 +376,7 @@ fn fly<'a>(
             Some(first) => first,
             None => ports.wait_on_world(
                 &format_args!("the observation of round {next_round}"),
-                waits.timeout,
-                waits.world,
+                world_timeout,
                 || {
                     while let Some(sample) = ports.try_observation()? {
                         if sample.round >= next_round {
@@ -467,7 +463,7 @@ fn await_admission(
 ) -> Result<(usize, ObservationSample)> {
     let request = JoinRequest::new(nonce, ask.slot());
     let mut asked: Option<Instant> = None;
-    ports.waiter().wait(&"admission by the world", timeout, || {
+    ports.wait_on_world(&"admission by the world", timeout, || {
         if asked.is_none_or(|at| at.elapsed() >= REJOIN_PAUSE) {
             ports.send_join(&request)?;
             asked = Some(Instant::now());
@@ -487,10 +483,8 @@ fn await_admission(
 }
 
 /// Reads the run's description (for an attaching agent).
-fn read_run_info(ports: &AgentPorts, waits: WorldWaits) -> Result<Setup> {
-    let description = &"the run's description";
-    let info =
-        ports.wait_on_world(description, waits.timeout, waits.world, || ports.try_run_info())?;
+fn read_run_info(ports: &AgentPorts, timeout: Duration) -> Result<Setup> {
+    let info = ports.wait_on_world(&"the run's description", timeout, || ports.try_run_info())?;
     Ok(Setup {
         scenario: RunInfo::unpack(&info.scenario, "run_info.scenario")?,
         trials: info.trials as usize,

@@ -42,9 +42,16 @@ type Ipc = ipc::Service;
 const WAKE_WORLD: &str = "wake/world";
 const WAKE_AGENTS: &str = "wake/agents";
 const WAKE_SUPERVISOR: &str = "wake/supervisor";
-/// How long a wait for a peer goes on before the waiter looks at whether the peer's node is
-/// gone ([`RunServices::departed_nodes`]): rounds take microseconds, and a look costs more.
-pub const LOOK_FOR_GONE_PEERS_AFTER: Duration = Duration::from_millis(20);
+/// How long the world's wait for an agent goes on before it looks for the agent's node
+/// ([`RunServices::departed_nodes`]), and how often it looks again: a crashed agent is
+/// dropped within tens of milliseconds.
+pub const LOOK_FOR_GONE_AGENTS: (Duration, Duration) =
+    (Duration::from_millis(20), Duration::from_millis(100));
+/// The same for an agent's wait for the world. Every agent waits while one is slow, so the
+/// agents look less often than the world: an attached agent still learns of a killed world
+/// within about a second instead of at its `--world-timeout-ms` (30 s).
+pub const LOOK_FOR_GONE_WORLD: (Duration, Duration) =
+    (Duration::from_millis(200), Duration::from_secs(1));
 /// Start of every file name a run leaves in `/dev/shm` and under the iceoryx2 root; `.` cannot
 /// occur in a run id, so `flockstep.ab.` never matches the files of run `abc`.
 const PREFIX_HEAD: &str = "flockstep.";

@@ -79,10 +79,10 @@ fn an_agent_waits_for_the_world_to_leave() {
     let config = run("world-gone");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
-    let stayed = agent.await_world_gone(Duration::from_millis(50), None).unwrap();
+    let stayed = agent.await_world_gone(Duration::from_millis(50)).unwrap();
     assert!(!stayed, "the world is still there");
     drop(world);
-    assert!(agent.await_world_gone(BOUND, None).unwrap(), "the world has left");
+    assert!(agent.await_world_gone(BOUND).unwrap(), "the world has left");
 }
 
 #[test]
@@ -416,32 +416,31 @@ fn a_wait_on_a_world_that_is_gone_ends_at_once() {
         agent.waiter().wait(&"the world's observation", BOUND, || agent.try_observation()).unwrap();
     let node = SenderNode::of(&first);
     assert_eq!(node.pid(), Some(world.id()), "the observation names its sender");
+    assert_eq!(agent.world(), Some(node), "the world's node is its observation publisher's");
     let what = format_args!("observation of round {}", 9);
     let short = Duration::from_millis(100);
-    let wait_on = |world, timeout| agent.wait_on_world(&what, timeout, world, || Ok(None::<()>));
+    let wait_on = |timeout| agent.wait_on_world(&what, timeout, || Ok(None::<()>));
     for (state, signal) in [("live", libc::SIGCONT), ("stopped", libc::SIGSTOP)] {
         // SAFETY: signalling our own child by pid.
         assert_eq!(unsafe { libc::kill(world.id() as libc::pid_t, signal) }, 0);
-        let waited = wait_on(Some(node), short);
+        let waited = wait_on(short);
         assert!(matches!(waited, Err(TransportError::Timeout { .. })), "{state}: {waited:?}");
     }
     world.kill().unwrap();
     let long = Duration::from_secs(60);
     for state in ["a zombie", "reaped"] {
         let started = std::time::Instant::now();
-        let error = wait_on(Some(node), long).unwrap_err();
+        let error = wait_on(long).unwrap_err();
         let text = error.to_string();
         let named = format!("the world (process {}) is gone", world.id());
         assert!(matches!(error, TransportError::WorldGone { .. }), "{state}: {text}");
         assert!(text.contains(&named) && text.contains("round 9"), "{state}: {text}");
         assert!(started.elapsed() < long / 2, "{state}: noticed after {:?}", started.elapsed());
-        assert!(agent.await_world_gone(long, Some(node)).unwrap(), "{state}: the world is gone");
+        assert!(agent.await_world_gone(long).unwrap(), "{state}: the world is gone");
         if state == "a zombie" {
             world.wait().unwrap();
         }
     }
-    let unknown = wait_on(None, short);
-    assert!(matches!(unknown, Err(TransportError::Timeout { .. })), "{unknown:?}");
     // The last node out may have cleaned the world's dead node already.
     drop((first, agent));
     let cleaned = cleanup_run(&config.run_id).unwrap();

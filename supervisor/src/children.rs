@@ -144,14 +144,16 @@ impl Process {
     }
 
     /// The last error line the process logged (or its last line), for error messages. A
-    /// process killed by a signal did not get to say why: its last line, if not an error,
-    /// is whatever it logged last, and is not offered as a reason.
+    /// process killed from outside (SIGKILL, SIGTERM, SIGINT) did not get to say why: its
+    /// last line, if not an error, is whatever it logged last, and is not offered as a
+    /// reason. One that aborted (an allocation failure, say) may have said why last.
     pub fn last_words(&self) -> String {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();
         let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
         let killed = self
             .status
-            .is_some_and(|status| std::os::unix::process::ExitStatusExt::signal(&status).is_some());
+            .and_then(|status| std::os::unix::process::ExitStatusExt::signal(&status))
+            .is_some_and(|signal| matches!(signal, libc::SIGKILL | libc::SIGTERM | libc::SIGINT));
         let last = lines.last().filter(|_| !killed);
         match lines.iter().rev().find(|l| l.contains("error")).or(last) {
             Some(line) => line.trim().to_string(),

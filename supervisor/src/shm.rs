@@ -475,7 +475,6 @@ impl Fleet<'_> {
     /// down because the world dropped it, that. One that left because the world was gone
     /// ([`EXIT_WORLD_GONE`]) did not fail once the world has ended.
     fn newly_failed_agents(&mut self) -> Result<Vec<(usize, String)>> {
-        let world_ended = self.world.status()?.is_some();
         let mut failed = Vec::new();
         for AgentProcess { process, slot, noted, .. } in &mut self.agents {
             let Some(status) = process.status()? else { continue };
@@ -483,8 +482,12 @@ impl Fleet<'_> {
                 continue;
             }
             *noted = true;
-            // It left because the world had: the world's end is the news.
-            if world_ended && status.code() == Some(EXIT_WORLD_GONE.into()) {
+            // It left because the world had: the world's end is the news. Looked at after
+            // the agent's exit, which comes after the world's.
+            let left_with_world = status.code() == Some(EXIT_WORLD_GONE.into())
+                && !process.brought_down()
+                && self.world.status()?.is_some();
+            if left_with_world {
                 continue;
             }
             let note = if process.brought_down() {

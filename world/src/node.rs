@@ -15,7 +15,7 @@ use clap::Parser;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
     exit_with_parent, process_stat, RunConfig, RunServices, SenderNode, SignalMode, TransportError,
-    WorldPorts, LOOK_FOR_GONE_PEERS_AFTER,
+    WorldPorts, LOOK_FOR_GONE_AGENTS,
 };
 use flockstep_proto::{
     slots_in, JoinRequest, Membership, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -450,7 +450,8 @@ impl WorldNode {
         let Self { world, ports, members, .. } = self;
         let (round, live) = (this_round.number, this_round.live);
         // Rounds take microseconds: only a round this slow is worth a look at processes.
-        let mut overdue = ports.waiter().overdue_after(LOOK_FOR_GONE_PEERS_AFTER);
+        let mut overdue =
+            ports.waiter().overdue_after(LOOK_FOR_GONE_AGENTS.0, LOOK_FOR_GONE_AGENTS.1);
         let mut answers = Answers::default();
         let waited =
             ports.waiter().wait(&format_args!("the answers of round {round}"), timeout, || {

@@ -3,7 +3,7 @@
 //! event.
 
 use super::{
-    termination_requested, Ipc, RunServices, TransportError, Waiter, LOOK_FOR_GONE_PEERS_AFTER,
+    termination_requested, Ipc, RunServices, TransportError, Waiter, LOOK_FOR_GONE_WORLD,
     WAKE_AGENTS, WAKE_SUPERVISOR, WAKE_WORLD,
 };
 use crate::services::{ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
@@ -107,6 +107,7 @@ impl RunServices {
             actions: self.publisher(&self.actions, ACTIONS)?,
             wake_world: self.notifier(&self.wake_world, WAKE_WORLD)?,
             waiter,
+            world: std::cell::Cell::new(None),
             services: self,
         })
     }
@@ -448,6 +449,8 @@ pub struct AgentPorts {
     actions: Publisher<Ipc, Action, ()>,
     wake_world: Notifier<Ipc>,
     waiter: Waiter,
+    /// The world's node, once seen ([`AgentPorts::world`]).
+    world: std::cell::Cell<Option<SenderNode>>,
     services: RunServices,
 }
 
@@ -511,24 +514,37 @@ impl AgentPorts {
         &self.waiter
     }
 
+    /// The world's node: the one publisher of observations (the service allows one),
+    /// remembered once seen, so it is known after the world has gone too. None before the
+    /// world has made its publisher.
+    pub fn world(&self) -> Option<SenderNode> {
+        if self.world.get().is_none() {
+            self.services.observations.dynamic_config().list_publishers(|publisher| {
+                self.world.set(Some(SenderNode(publisher.node_id)));
+                CallbackProgression::Stop
+            });
+        }
+        self.world.get()
+    }
+
     /// Waits for `poll` as [`Waiter::wait`] does, and also ends once the world's node
-    /// (`world`, the [`SenderNode`] of an observation; None if unknown) is gone, with
-    /// [`TransportError::WorldGone`]. It looks for the node once the wait has lasted
-    /// [`LOOK_FOR_GONE_PEERS_AFTER`] ([`RunServices::departed_nodes`]), so a world killed with
-    /// SIGKILL is noticed within tens of milliseconds instead of at `timeout`
-    /// (`--world-timeout-ms`, 30 s): the supervisor brings down the agents it started, but an
-    /// attached agent has only this.
+    /// ([`Self::world`]) is gone, with [`TransportError::WorldGone`]. It looks for the node
+    /// once the wait has lasted a while and then now and then ([`LOOK_FOR_GONE_WORLD`])
+    /// ([`RunServices::departed_nodes`]), so a world killed with SIGKILL is noticed within
+    /// about a second instead of at `timeout` (`--world-timeout-ms`, 30 s): the supervisor
+    /// brings down the agents it started, but an attached agent has only this. A world whose
+    /// node was removed before this agent saw its publisher is not known, and is left to
+    /// `timeout`.
     pub fn wait_on_world<T>(
         &self,
         what: &dyn std::fmt::Display,
         timeout: Duration,
-        world: Option<SenderNode>,
         mut poll: impl FnMut() -> Result<Option<T>, TransportError>,
     ) -> Result<T, TransportError> {
-        let mut overdue = self.waiter.overdue_after(LOOK_FOR_GONE_PEERS_AFTER);
+        let mut overdue = self.waiter.overdue_after(LOOK_FOR_GONE_WORLD.0, LOOK_FOR_GONE_WORLD.1);
         self.waiter.wait(what, timeout, || {
             let found = poll()?;
-            if let Some(world) = world.filter(|_| found.is_none() && overdue.check()) {
+            if let Some(world) = self.world().filter(|_| found.is_none() && overdue.check()) {
                 if self.services.departed_nodes().includes(world) {
                     let process = world
                         .pid()
@@ -544,21 +560,17 @@ impl AgentPorts {
         })
     }
 
-    /// Waits until the world has left the run (its observation publisher or its node `world`,
-    /// as in [`Self::wait_on_world`], is gone), at most `timeout`, or until this process is
-    /// asked to terminate; true if the world left. An agent's answer to the stop
+    /// Waits until the world has left the run (its observation publisher or its node, as in
+    /// [`Self::wait_on_world`], is gone), at most `timeout`, or until this process is asked
+    /// to terminate; true if the world left. An agent's answer to the stop
     /// round is its last sample, and a process that ended right after sending it lost it
     /// now and then (a Ctrl-C at start-up failed about one run in seven with the world
     /// waiting for a stop answer from an agent already gone): an agent leaves after the
     /// world, which reads every answer before it ends.
-    pub fn await_world_gone(
-        &self,
-        timeout: Duration,
-        world: Option<SenderNode>,
-    ) -> Result<bool, TransportError> {
+    pub fn await_world_gone(&self, timeout: Duration) -> Result<bool, TransportError> {
         let observations = &self.services.observations;
         let gone = || Ok((observations.dynamic_config().number_of_publishers() == 0).then_some(()));
-        match self.wait_on_world(&"the world to leave", timeout, world, gone) {
+        match self.wait_on_world(&"the world to leave", timeout, gone) {
             Ok(()) | Err(TransportError::WorldGone { .. }) => Ok(true),
             Err(TransportError::Timeout { .. } | TransportError::Terminated { .. }) => Ok(false),
             Err(e) => Err(e),

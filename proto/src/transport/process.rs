@@ -1,8 +1,9 @@
 //! What `/proc` says about a process: which process made an iceoryx2 node (its id carries
 //! the process id), whether a process id is still taken, and a process's parent. Whether a
 //! run's peer is gone is not asked here but of iceoryx2 ([`super::RunServices::departed_nodes`]):
-//! a process id means nothing in another pid namespace, and a run's processes need not share
-//! one.
+//! a process id means nothing in another pid namespace, where an attached agent may run (a
+//! container sharing `/dev/shm`). The process ids a run reports (membership, clean-up) are
+//! still those of the namespace that reads them.
 
 /// The id of the process that created the node `node_id` (iceoryx2 builds the id from it);
 /// also the name of the node's directory.

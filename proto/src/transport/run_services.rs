@@ -272,8 +272,10 @@ impl RunServices {
     /// on its monitor file while it lives, and the system releases it as the process ends
     /// (crashed or killed, reaped or not; a stopped process keeps it), and a node whose
     /// resources were removed is no longer listed. Unlike a look at `/proc`, this holds across
-    /// pid namespaces, since the run's processes share its files. Listing reads each node's
-    /// monitor (µs each): for a peer silent for a while, not for every poll.
+    /// pid namespaces, since the run's processes share its files. Listing reads this user's
+    /// node directory and each node's monitor (0.3 ms at 2 UAVs, 2.2 ms at 32): for a peer
+    /// silent for a while, now and then ([`super::Overdue`]). A listing without this
+    /// process's own node is taken as incomplete (the node directory gone, say).
     pub fn departed_nodes(&self) -> DepartedNodes {
         let mut listed = Vec::new();
         let complete = Node::<Ipc>::list(self.node.node().config(), |state| {
@@ -286,6 +288,8 @@ impl RunServices {
             CallbackProgression::Continue
         })
         .is_ok();
+        let own = self.node.node().id().value();
+        let complete = complete && listed.iter().any(|&(id, dead)| id == own && !dead);
         DepartedNodes { listed, complete }
     }
 
