@@ -198,17 +198,30 @@ pub struct RunNode {
     _last_out: LastOut,
 }
 
+/// The name of the world's node. The world makes its node before the run's services, so an
+/// agent that opened them and finds no live node of this name knows the world is gone
+/// ([`RunServices::departed_nodes`]), even if it never saw the world's publisher. The other
+/// nodes of a run are unnamed.
+pub const WORLD_NODE_NAME: &str = "world";
+
 impl RunNode {
-    /// Creates the node after installing the signal handling `run` asks for. Creating it also
-    /// removes the resources of dead nodes of the same run.
-    pub fn new(run: &RunConfig) -> Result<RunNode, TransportError> {
+    /// Creates the node, named `name` (see [`WORLD_NODE_NAME`]), after installing the signal
+    /// handling `run` asks for. Creating it also removes the resources of dead nodes of the
+    /// same run.
+    pub fn new(run: &RunConfig, name: Option<&str>) -> Result<RunNode, TransportError> {
         let config = iceoryx_config(&run.run_id)?;
         if run.signals != SignalMode::Untouched {
             install_termination_signals(run.signals)?;
         }
         // Armed before the node exists, so a failure further on still cleans up.
         let last_out = LastOut::new(&run.run_id);
-        let node = NodeBuilder::new()
+        let mut builder = NodeBuilder::new();
+        if let Some(name) = name {
+            let name = NodeName::new(name)
+                .map_err(|e| setup(&run.run_id, format!("naming the node `{name}`"), e))?;
+            builder = builder.name(&name);
+        }
+        let node = builder
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Ipc>()

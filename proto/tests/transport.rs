@@ -354,12 +354,37 @@ fn child_process() {
     std::thread::sleep(Duration::from_secs(60));
 }
 
+/// A child process that is killed and reaped when dropped, so a failed assertion leaves
+/// neither a running nor a stopped (SIGSTOP) child behind.
+struct Child(std::process::Child);
+
+impl std::ops::Deref for Child {
+    type Target = std::process::Child;
+    fn deref(&self) -> &std::process::Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Child {
+    fn deref_mut(&mut self) -> &mut std::process::Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        // Fails only for a child already reaped, which is what is wanted.
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// Starts `child_process` in `role` and waits until its ports exist; returns it with the
 /// rest of its stdout and what it printed so far.
 fn spawn_child(
     config: &RunConfig,
     role: &str,
-) -> (std::process::Child, std::io::Lines<std::io::BufReader<std::process::ChildStdout>>, String) {
+) -> (Child, std::io::Lines<std::io::BufReader<std::process::ChildStdout>>, String) {
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
         .args(["--exact", "child_process", "--ignored", "--nocapture", "--test-threads=1"])
         .env("FLOCKSTEP_TEST_CHILD_RUN", &config.run_id)
@@ -376,7 +401,7 @@ fn spawn_child(
         seen.push_str(&line);
         seen.push('\n');
         if line.contains("child-ready") {
-            return (child, lines, seen);
+            return (Child(child), lines, seen);
         }
     }
     let status = child.wait().unwrap();
@@ -403,7 +428,7 @@ fn assert_swept(config: &RunConfig, dead_nodes: usize, context: &str) {
 }
 
 /// A wait on a world whose node is gone (its process killed: a zombie, then reaped) ends
-/// within tens of milliseconds, naming the world's process and what it waited for, instead
+/// within about a second (`LOOK_FOR_GONE_WORLD`), naming the world's process and what it waited for, instead
 /// of at its deadline; a live world, or one stopped with SIGSTOP (a Ctrl-Z pauses the whole
 /// run), leaves the wait to its deadline.
 #[test]
@@ -447,6 +472,40 @@ fn a_wait_on_a_world_that_is_gone_ends_at_once() {
     assert_eq!(cleaned.live_nodes, 0, "{cleaned:?}");
     let after = leftover_files(&config.run_id).unwrap();
     assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
+}
+
+/// An agent that never saw the world's publisher (it opened the run's services after the
+/// world was killed and a clean-up removed the world's ports) knows the world by its node's
+/// name: the wait ends within about a second, not at its deadline. A live world not yet
+/// publishing (its services made, its ports not) leaves the wait to its deadline.
+#[test]
+fn a_wait_on_a_world_gone_before_the_agent_saw_it_ends_at_once_too() {
+    let _sweeps = dead_nodes_lock();
+    let unpublished = run("world-unpublished");
+    let world = RunServices::create(&unpublished).unwrap();
+    let agent = RunServices::open(&unpublished).unwrap().into_agent().unwrap();
+    let short = Duration::from_millis(1500);
+    let waited = agent.wait_on_world(&"a round", short, || Ok(None::<()>));
+    assert!(matches!(waited, Err(TransportError::Timeout { .. })), "live, unseen: {waited:?}");
+    drop((agent, world));
+
+    let config = run("world-unseen");
+    let (mut world, _, _) = spawn_child(&config, "world");
+    let keeper = RunServices::open(&config).unwrap();
+    world.kill().unwrap();
+    world.wait().unwrap();
+    assert_eq!(keeper.cleanup_dead_nodes(), 1, "the killed world's node is removed");
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    assert_eq!(agent.world(), None, "the world's publisher went with its node");
+    let long = Duration::from_secs(20);
+    let started = std::time::Instant::now();
+    let error = agent.wait_on_world(&"admission", long, || Ok(None::<()>)).unwrap_err();
+    let text = error.to_string();
+    assert!(matches!(error, TransportError::WorldGone { .. }), "{text}");
+    assert!(text.contains("the world (process unknown) is gone"), "{text}");
+    assert!(started.elapsed() < long / 2, "noticed after {:?}", started.elapsed());
+    drop((agent, keeper));
+    assert_swept(&config, 0, "after the unseen world");
 }
 
 /// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.

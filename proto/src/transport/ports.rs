@@ -532,9 +532,9 @@ impl AgentPorts {
     /// once the wait has lasted a while and then now and then ([`LOOK_FOR_GONE_WORLD`])
     /// ([`RunServices::departed_nodes`]), so a world killed with SIGKILL is noticed within
     /// about a second instead of at `timeout` (`--world-timeout-ms`, 30 s): the supervisor
-    /// brings down the agents it started, but an attached agent has only this. A world whose
-    /// node was removed before this agent saw its publisher is not known, and is left to
-    /// `timeout`.
+    /// brings down the agents it started, but an attached agent has only this. Before the
+    /// world's publisher is seen (or once a clean-up removed it unseen), the world is gone
+    /// when no live node bears its name ([`crate::transport::WORLD_NODE_NAME`]).
     pub fn wait_on_world<T>(
         &self,
         what: &dyn std::fmt::Display,
@@ -544,17 +544,21 @@ impl AgentPorts {
         let mut overdue = self.waiter.overdue_after(LOOK_FOR_GONE_WORLD.0, LOOK_FOR_GONE_WORLD.1);
         self.waiter.wait(what, timeout, || {
             let found = poll()?;
-            if let Some(world) = self.world().filter(|_| found.is_none() && overdue.check()) {
-                if self.services.departed_nodes().includes(world) {
-                    let process = world
-                        .pid()
-                        .map_or("process unknown".into(), |pid| format!("process {pid}"));
-                    return Err(TransportError::WorldGone {
-                        run: self.run_id().to_owned(),
-                        world: process,
-                        what: what.to_string(),
-                    });
-                }
+            if found.is_some() || !overdue.check() {
+                return Ok(found);
+            }
+            let departed = self.services.departed_nodes();
+            let world = self.world();
+            let gone = world.map_or(departed.lacks_a_world(), |world| departed.includes(world));
+            if gone {
+                let process = world
+                    .and_then(|world| world.pid())
+                    .map_or("process unknown".into(), |pid| format!("process {pid}"));
+                return Err(TransportError::WorldGone {
+                    run: self.run_id().to_owned(),
+                    world: process,
+                    what: what.to_string(),
+                });
             }
             Ok(found)
         })

@@ -2,7 +2,7 @@
 
 use super::{
     setup, termination_requested, Ipc, RunConfig, RunNode, SenderNode, TransportError, WAKE_AGENTS,
-    WAKE_SUPERVISOR, WAKE_WORLD,
+    WAKE_SUPERVISOR, WAKE_WORLD, WORLD_NODE_NAME,
 };
 use crate::limits::MAX_AGENTS;
 use crate::services::{self, ACTIONS, CONTROL, EPISODES, JOIN, OBSERVATIONS, RUN_INFO};
@@ -164,7 +164,7 @@ impl RunServices {
     /// The world's constructor: creates every service of the run with its limits. Fails if a
     /// live run already uses the run id.
     pub fn create(run: &RunConfig) -> Result<RunServices, TransportError> {
-        let run_node = RunNode::new(run)?;
+        let run_node = RunNode::new(run, Some(WORLD_NODE_NAME))?;
         let node = run_node.node();
         let id = &run.run_id;
         let ps = |what: &str| service_name(id, what);
@@ -211,7 +211,7 @@ impl RunServices {
     /// The agents' and the supervisor's constructor: opens every service, retrying while the
     /// world has not created it yet, for at most `run.open_timeout` in all.
     pub fn open(run: &RunConfig) -> Result<RunServices, TransportError> {
-        let run_node = RunNode::new(run)?;
+        let run_node = RunNode::new(run, None)?;
         let node = run_node.node();
         let id = &run.run_id;
         let deadline = Instant::now() + run.open_timeout;
@@ -278,11 +278,22 @@ impl RunServices {
     /// process's own node is taken as incomplete (the node directory gone, say).
     pub fn departed_nodes(&self) -> DepartedNodes {
         let mut listed = Vec::new();
+        let mut maybe_world = false;
         let complete = Node::<Ipc>::list(self.node.node().config(), |state| {
             let entry = match &state {
-                NodeState::Alive(node) => (node.id().value(), false),
+                NodeState::Alive(node) => {
+                    // A node whose details could not be read may be the world.
+                    maybe_world |= node
+                        .details()
+                        .as_ref()
+                        .is_none_or(|details| details.name().as_str() == WORLD_NODE_NAME);
+                    (node.id().value(), false)
+                }
                 NodeState::Dead(node) => (node.id().value(), true),
-                NodeState::Inaccessible(id) | NodeState::Undefined(id) => (id.value(), false),
+                NodeState::Inaccessible(id) | NodeState::Undefined(id) => {
+                    maybe_world = true;
+                    (id.value(), false)
+                }
             };
             listed.push(entry);
             CallbackProgression::Continue
@@ -290,7 +301,7 @@ impl RunServices {
         .is_ok();
         let own = self.node.node().id().value();
         let complete = complete && listed.iter().any(|&(id, dead)| id == own && !dead);
-        DepartedNodes { listed, complete }
+        DepartedNodes { listed, maybe_world, complete }
     }
 
     /// Removes the resources of dead nodes of this run (a crashed agent's ports). Returns how
@@ -307,6 +318,9 @@ impl RunServices {
 pub struct DepartedNodes {
     /// Each listed node's id, and whether it is dead.
     listed: Vec<(u128, bool)>,
+    /// Whether a live node is named [`WORLD_NODE_NAME`], or a node's name or state could not
+    /// be read.
+    maybe_world: bool,
     /// Whether every node could be listed; if not, none counts as departed.
     complete: bool,
 }
@@ -317,6 +331,12 @@ impl DepartedNodes {
     pub fn includes(&self, node: SenderNode) -> bool {
         self.complete
             && self.listed.iter().find(|(id, _)| *id == node.id()).is_none_or(|&(_, dead)| dead)
+    }
+
+    /// Whether no live node is the world's: for an agent that never saw the world's
+    /// publisher (see [`WORLD_NODE_NAME`]).
+    pub fn lacks_a_world(&self) -> bool {
+        self.complete && !self.maybe_world
     }
 }
 
