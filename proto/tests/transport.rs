@@ -508,6 +508,36 @@ fn a_wait_on_a_world_gone_before_the_agent_saw_it_ends_at_once_too() {
     assert_swept(&config, 0, "after the unseen world");
 }
 
+/// An agent that received an observation knows the world by it, even if none of its waits
+/// lasted long enough to look for the world: when the world is killed and a clean-up removes
+/// its ports before the agent first looks, the wait still names the world's process. (Once
+/// the world was known only by listing the observation publishers, which a clean-up had
+/// emptied: an attached agent's error said "process unknown" in one CI run.)
+#[test]
+fn an_agent_knows_the_world_by_its_first_observation() {
+    let _sweeps = dead_nodes_lock();
+    let config = run("world-known");
+    let (mut world, _, _) = spawn_child(&config, "world");
+    let keeper = RunServices::open(&config).unwrap();
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    let first =
+        agent.waiter().wait(&"the world's observation", BOUND, || agent.try_observation()).unwrap();
+    drop(first);
+    world.kill().unwrap();
+    world.wait().unwrap();
+    assert_eq!(keeper.cleanup_dead_nodes(), 1, "the killed world's node is removed");
+    let long = Duration::from_secs(20);
+    let started = std::time::Instant::now();
+    let error = agent.wait_on_world(&"a round", long, || Ok(None::<()>)).unwrap_err();
+    let text = error.to_string();
+    let named = format!("the world (process {}) is gone", world.id());
+    assert!(matches!(error, TransportError::WorldGone { .. }), "{text}");
+    assert!(text.contains(&named), "{text}");
+    assert!(started.elapsed() < long / 2, "noticed after {:?}", started.elapsed());
+    drop((agent, keeper));
+    assert_swept(&config, 0, "after the known world");
+}
+
 /// Starts `child_process` in `role`, waits until its ports exist, and SIGKILLs it.
 fn spawn_and_kill(config: &RunConfig, role: &str) {
     let (mut child, _, _) = spawn_child(config, role);

@@ -455,11 +455,17 @@ pub struct AgentPorts {
 }
 
 impl AgentPorts {
-    /// The next observation, read in place in shared memory.
+    /// The next observation, read in place in shared memory. Its sender is the world
+    /// ([`Self::world`]), remembered from the first one.
     pub fn try_observation(&self) -> Result<Option<ObservationSample>, TransportError> {
-        self.observations
+        let observation = self
+            .observations
             .receive()
-            .map_err(|e| port_error(&self.services.run.run_id, OBSERVATIONS, "receiving", e))
+            .map_err(|e| port_error(&self.services.run.run_id, OBSERVATIONS, "receiving", e))?;
+        if let (Some(sample), None) = (&observation, self.world.get()) {
+            self.world.set(Some(SenderNode::of(sample)));
+        }
+        Ok(observation)
     }
 
     pub fn run_id(&self) -> &str {
@@ -515,8 +521,9 @@ impl AgentPorts {
     }
 
     /// The world's node: the one publisher of observations (the service allows one),
-    /// remembered once seen, so it is known after the world has gone too. None before the
-    /// world has made its publisher.
+    /// remembered once seen (as a publisher, or as the sender of an observation), so it is
+    /// known after the world has gone and a clean-up has removed its ports too. None before
+    /// the world has made its publisher.
     pub fn world(&self) -> Option<SenderNode> {
         if self.world.get().is_none() {
             self.services.observations.dynamic_config().list_publishers(|publisher| {
