@@ -6,8 +6,8 @@
 use flockstep_proto::services::MAX_RUN_ID;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    cleanup_run, iceoryx_root, leftover_files, sweep_stale_runs, FromWorld, RunConfig, RunServices,
-    SenderNode, SignalMode, SupervisorPorts, TransportError,
+    cleanup_run, iceoryx_root, leftover_files, sweep_stale_runs, AgentPorts, FromWorld, RunConfig,
+    RunServices, SenderNode, SignalMode, SupervisorPorts, TransportError,
 };
 use flockstep_proto::{Action, EpisodeReport, Membership, Observation};
 use std::io::BufRead;
@@ -490,22 +490,39 @@ fn a_wait_on_a_world_gone_before_the_agent_saw_it_ends_at_once_too() {
     drop((agent, world));
 
     let config = run("world-unseen");
-    let (mut world, _, _) = spawn_child(&config, "world");
-    let keeper = RunServices::open(&config).unwrap();
+    let (world, keeper) = spawn_world(&config);
+    kill_and_clean(world, &keeper);
+    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+    assert_eq!(agent.world(), None, "the world's publisher went with its node");
+    assert_noticed_gone(&agent, "the world (process unknown) is gone");
+    drop((agent, keeper));
+    assert_swept(&config, 0, "after the unseen world");
+}
+
+/// Starts a world child for `config` and opens the run's services, to keep them while the
+/// world is killed.
+fn spawn_world(config: &RunConfig) -> (Child, RunServices) {
+    let (world, _, _) = spawn_child(config, "world");
+    (world, RunServices::open(config).unwrap())
+}
+
+/// SIGKILLs and reaps `world`, and has `keeper` remove its node and ports.
+fn kill_and_clean(mut world: Child, keeper: &RunServices) {
     world.kill().unwrap();
     world.wait().unwrap();
     assert_eq!(keeper.cleanup_dead_nodes(), 1, "the killed world's node is removed");
-    let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
-    assert_eq!(agent.world(), None, "the world's publisher went with its node");
+}
+
+/// Waits on a gone world with a long deadline: the wait must end well before it, with
+/// [`TransportError::WorldGone`] saying `named`.
+fn assert_noticed_gone(agent: &AgentPorts, named: &str) {
     let long = Duration::from_secs(20);
     let started = std::time::Instant::now();
-    let error = agent.wait_on_world(&"admission", long, || Ok(None::<()>)).unwrap_err();
+    let error = agent.wait_on_world(&"a round", long, || Ok(None::<()>)).unwrap_err();
     let text = error.to_string();
     assert!(matches!(error, TransportError::WorldGone { .. }), "{text}");
-    assert!(text.contains("the world (process unknown) is gone"), "{text}");
+    assert!(text.contains(named), "{text}");
     assert!(started.elapsed() < long / 2, "noticed after {:?}", started.elapsed());
-    drop((agent, keeper));
-    assert_swept(&config, 0, "after the unseen world");
 }
 
 /// An agent that received an observation knows the world by it, even if none of its waits
@@ -517,23 +534,14 @@ fn a_wait_on_a_world_gone_before_the_agent_saw_it_ends_at_once_too() {
 fn an_agent_knows_the_world_by_its_first_observation() {
     let _sweeps = dead_nodes_lock();
     let config = run("world-known");
-    let (mut world, _, _) = spawn_child(&config, "world");
-    let keeper = RunServices::open(&config).unwrap();
+    let (world, keeper) = spawn_world(&config);
+    let named = format!("the world (process {}) is gone", world.id());
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
     let first =
         agent.waiter().wait(&"the world's observation", BOUND, || agent.try_observation()).unwrap();
     drop(first);
-    world.kill().unwrap();
-    world.wait().unwrap();
-    assert_eq!(keeper.cleanup_dead_nodes(), 1, "the killed world's node is removed");
-    let long = Duration::from_secs(20);
-    let started = std::time::Instant::now();
-    let error = agent.wait_on_world(&"a round", long, || Ok(None::<()>)).unwrap_err();
-    let text = error.to_string();
-    let named = format!("the world (process {}) is gone", world.id());
-    assert!(matches!(error, TransportError::WorldGone { .. }), "{text}");
-    assert!(text.contains(&named), "{text}");
-    assert!(started.elapsed() < long / 2, "noticed after {:?}", started.elapsed());
+    kill_and_clean(world, &keeper);
+    assert_noticed_gone(&agent, &named);
     drop((agent, keeper));
     assert_swept(&config, 0, "after the known world");
 }
