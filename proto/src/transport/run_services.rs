@@ -428,3 +428,52 @@ fn retry<T, E: Into<ServiceFailure>>(
         std::thread::sleep(OPEN_RETRY);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::SignalMode;
+
+    /// Runs [`retry`] over `failures`, then a success; returns its result and the attempts.
+    fn open_after<E: Into<ServiceFailure>>(
+        failures: Vec<E>,
+    ) -> (Result<&'static str, TransportError>, usize) {
+        let run = RunConfig::new("t-retry", SignalMode::Untouched);
+        let name = ServiceName::new("t-retry/service").expect("a valid service name");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let (mut failures, mut attempts) = (failures.into_iter(), 0);
+        let opened = retry(&run, &name, deadline, || {
+            attempts += 1;
+            failures.next().map_or(Ok("opened"), Err)
+        });
+        (opened, attempts)
+    }
+
+    #[test]
+    fn an_open_cut_short_by_a_signal_or_made_before_the_world_is_tried_again() {
+        use PublishSubscribeOpenError::{DoesNotExist, Interrupt};
+        let (opened, attempts) = open_after(vec![Interrupt, DoesNotExist, Interrupt]);
+        assert_eq!((opened.expect("opened on the fourth attempt"), attempts), ("opened", 4));
+        let (opened, attempts) = open_after(vec![EventOpenError::Interrupt]);
+        assert_eq!((opened.expect("opened on the second attempt"), attempts), ("opened", 2));
+    }
+
+    #[test]
+    fn an_open_that_fails_otherwise_fails_at_once_and_names_the_service() {
+        let (opened, attempts) = open_after(vec![PublishSubscribeOpenError::IncompatibleTypes]);
+        let error = opened.expect_err("incompatible types are not retried").to_string();
+        assert_eq!(attempts, 1, "{error}");
+        assert!(error.contains("opening service `t-retry/service`"), "{error}");
+        let (opened, attempts) = open_after(vec![EventOpenError::InsufficientPermissions]);
+        assert!(opened.is_err());
+        assert_eq!(attempts, 1);
+    }
+
+    #[test]
+    fn a_create_of_a_service_that_exists_says_the_run_is_in_use() {
+        let (opened, attempts) = open_after(vec![PublishSubscribeCreateError::AlreadyExists]);
+        let error = opened.expect_err("an existing service is not retried");
+        assert_eq!(attempts, 1);
+        assert!(matches!(error, TransportError::RunInUse { .. }), "{error}");
+    }
+}
