@@ -135,19 +135,9 @@ pub fn eval(
     }
     let outcome = crate::run::run_experiment(&config, stop)?;
     let result = crate::summary::summary_file(&config.out)?;
-    for (agent, length) in
-        result["greedy_episode_length"].as_array().into_iter().flatten().enumerate()
-    {
-        let line = match length.as_f64() {
-            Some(length) => format!(
-                "UAV{} greedy episode length {length:.2} ({} of {} episodes truncated)",
-                agent + 1,
-                result["greedy_truncated"][agent],
-                result["greedy_episodes"][agent]
-            ),
-            None => format!("UAV{}: no greedy episode ended", agent + 1),
-        };
-        output::line(&line)?;
+    let agents = result["greedy_episode_length"].as_array().map_or(0, Vec::len);
+    for agent in 0..agents {
+        output::line(&crate::summary::greedy_line(&result, agent))?;
     }
     if !outcome.complete {
         output::message(&format!(

@@ -83,6 +83,12 @@ fn dispatch(cli: Cli, run_flags: &[String]) -> Result<u8> {
             let config = config::RunConfig::resolve(&cli.run)?;
             let stop = Interrupts::catch()?;
             let outcome = run::run_experiment(&config, &stop)?;
+            if !config.quiet {
+                let summary = summary::summary_file(&config.out)?;
+                for line in summary::closing_lines(&summary) {
+                    output::message(&format!("supervisor: {line}"));
+                }
+            }
             output::line(&config.out.join("summary.json").display().to_string())?;
             Ok(if outcome.complete { 0 } else { EXIT_INTERRUPTED as u8 })
         }

@@ -163,6 +163,49 @@ fn agents_that_flew(config: &RunConfig, recorder: &Recorder) -> Vec<Value> {
         .collect()
 }
 
+/// UAV `agent`'s greedy result in a `summary.json`, as a person reads it: the mean length
+/// and how many of its greedy episodes hit the tick cap. `eval` prints it, and a run says it
+/// when it ends.
+pub fn greedy_line(summary: &Value, agent: usize) -> String {
+    let uav = agent + 1;
+    match summary["greedy_episode_length"][agent].as_f64() {
+        Some(length) => format!(
+            "UAV{uav} greedy episode length {length:.2} ({} of {} episodes truncated)",
+            summary["greedy_truncated"][agent], summary["greedy_episodes"][agent]
+        ),
+        None => format!("UAV{uav} flew no greedy episode"),
+    }
+}
+
+/// What a run says when it ends, under its progress bar (which it clears): how long it
+/// took and how fast it went, whether it ran to its end, and per agent its greedy result
+/// and its mean over its last training episodes. All from its `summary.json`, which holds
+/// more.
+pub fn closing_lines(summary: &Value) -> Vec<String> {
+    let how = if summary["complete"].as_bool() == Some(true) {
+        "finished".to_string()
+    } else {
+        "stopped before its end (partial results, \"complete\": false)".to_string()
+    };
+    let mut lines = vec![format!(
+        "{how} in {:.2} s: {} rounds, {:.0} ticks/s",
+        summary["wall_seconds"].as_f64().unwrap_or(0.0),
+        summary["rounds"],
+        summary["ticks_per_second"].as_f64().unwrap_or(0.0)
+    )];
+    let agents = summary["greedy_episode_length"].as_array().map_or(0, Vec::len);
+    for agent in 0..agents {
+        let mut line = greedy_line(summary, agent);
+        let mean = summary["final_mean_episode_length_per_agent"][agent].as_f64();
+        let window = &summary["final_window_per_agent"][agent];
+        if let Some(mean) = mean {
+            line += &format!("; training mean {mean:.2} over its last {window} episodes");
+        }
+        lines.push(line);
+    }
+    lines
+}
+
 pub fn write(path: &Path, value: &Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value).expect("JSON values serialise");
     std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
@@ -179,6 +222,9 @@ pub fn summary_file(dir: &Path) -> Result<Value> {
 
 #[cfg(test)]
 mod tests {
+    use super::closing_lines;
+    use serde_json::{json, Value};
+
     #[test]
     fn the_recorded_iceoryx2_version_is_the_workspace_requirement() {
         let manifest = include_str!("../../Cargo.toml");
@@ -187,6 +233,55 @@ mod tests {
             manifest.contains(&requirement),
             "the workspace Cargo.toml has no `{}`: update ICEORYX2_VERSION",
             requirement.trim()
+        );
+    }
+
+    /// The fields `closing_lines` reads, as a run of two agents writes them.
+    fn summary_of(
+        complete: bool,
+        greedy: [Option<f64>; 2],
+        final_means: [Option<f64>; 2],
+    ) -> Value {
+        json!({
+            "complete": complete,
+            "wall_seconds": 5.5308,
+            "rounds": 780_567,
+            "ticks_per_second": 554_308.9,
+            "greedy_episode_length": greedy,
+            "greedy_truncated": [3, 0],
+            "greedy_episodes": greedy.map(|g| if g.is_some() { 4000 } else { 0 }),
+            "final_mean_episode_length_per_agent": final_means,
+            "final_window_per_agent": final_means.map(|m| m.map(|_| 1000)),
+        })
+    }
+
+    #[test]
+    fn a_finished_run_says_its_time_speed_and_each_agents_greedy_and_training_means() {
+        let summary =
+            summary_of(true, [Some(10.4225), Some(4.4535)], [Some(12.455), Some(5.33375)]);
+        assert_eq!(
+            closing_lines(&summary),
+            [
+                "finished in 5.53 s: 780567 rounds, 554309 ticks/s",
+                "UAV1 greedy episode length 10.42 (3 of 4000 episodes truncated); training mean \
+                 12.46 over its last 1000 episodes",
+                "UAV2 greedy episode length 4.45 (0 of 4000 episodes truncated); training mean \
+                 5.33 over its last 1000 episodes",
+            ]
+        );
+    }
+
+    #[test]
+    fn a_run_stopped_early_says_its_results_are_partial_and_what_it_did_not_fly() {
+        let summary = summary_of(false, [None, Some(4.0)], [Some(20.0), None]);
+        assert_eq!(
+            closing_lines(&summary),
+            [
+                "stopped before its end (partial results, \"complete\": false) in 5.53 s: \
+                 780567 rounds, 554309 ticks/s",
+                "UAV1 flew no greedy episode; training mean 20.00 over its last 1000 episodes",
+                "UAV2 greedy episode length 4.00 (0 of 4000 episodes truncated)",
+            ]
         );
     }
 }

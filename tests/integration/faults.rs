@@ -36,7 +36,8 @@ fn run_args<'a>(id: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
 }
 
 /// The run id is in no output of a run given `--out`: the supervisor says it at the start,
-/// and how another agent joins if routes are free; `--quiet` says nothing.
+/// and how another agent joins if routes are free; at the end it says how the run went;
+/// `--quiet` says nothing.
 #[test]
 fn a_run_names_its_id_and_how_to_attach_unless_quiet() {
     let stderr_of = |scenario: &str, quiet: bool| {
@@ -60,6 +61,12 @@ fn a_run_names_its_id_and_how_to_attach_unless_quiet() {
     let (id, _, stderr) = stderr_of("s3", false);
     assert!(stderr.contains(&format!("supervisor: run {id}")), "{stderr}");
     assert!(!stderr.contains("--attach"), "s3 has no free route:\n{stderr}");
+    // At its end it says how it went: `--eval-episodes 0` flies no greedy episode.
+    assert!(stderr.contains("supervisor: finished in "), "{stderr}");
+    for uav in ["UAV1", "UAV2"] {
+        let line = format!("supervisor: {uav} flew no greedy episode; training mean ");
+        assert!(stderr.contains(&line), "{stderr}");
+    }
     let (_, _, stderr) = stderr_of("s4", true);
     assert!(!stderr.contains("supervisor:"), "--quiet:\n{stderr}");
 }
