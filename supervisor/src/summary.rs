@@ -183,9 +183,9 @@ pub fn greedy_line(summary: &Value, agent: usize) -> String {
 /// more.
 pub fn closing_lines(summary: &Value) -> Vec<String> {
     let how = if summary["complete"].as_bool() == Some(true) {
-        "finished".to_string()
+        "finished"
     } else {
-        "stopped before its end (partial results, \"complete\": false)".to_string()
+        "stopped before its end (partial results, \"complete\": false)"
     };
     let mut lines = vec![format!(
         "{how} in {:.2} s: {} rounds, {:.0} ticks/s",
