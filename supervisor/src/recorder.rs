@@ -15,16 +15,19 @@ pub struct Recorder {
     bar: ProgressBar,
     quiet: bool,
     started: Instant,
-    /// When the message was last redrawn; None until the first redraw, which is at once.
-    last_draw: Option<Instant>,
+    /// When the message was last redrawn, and the phase it named; None until the first
+    /// redraw, which is at once.
+    last_draw: Option<(Instant, Phase)>,
     env_steps: u64,
     live: usize,
     /// Episodes recorded since the bar last moved: it moves at each redraw, since a move
     /// reads the clock and records come by the thousand.
     unshown: u64,
-    /// The phase of the latest record, shown before the bar: a final greedy evaluation of
-    /// policies that hit the tick cap can take a while after the last training episode.
-    phase: Phase,
+    /// The phase of each trial's latest record. The bar names the phase before it: a final
+    /// greedy evaluation of policies that hit the tick cap can take a while after the last
+    /// training episode. Trials go through their episodes at their own pace, so the run is
+    /// training while any of them is.
+    trial_phases: Vec<Phase>,
     /// What went wrong on the way (lost or restarted agents...), for `summary.json`. Kept
     /// here rather than returned by the transport so that a run that fails keeps them too.
     notes: Vec<String>,
@@ -48,6 +51,7 @@ impl Recorder {
         // Until the first record: the processes start and join.
         bar.set_prefix("starting");
         Recorder {
+            trial_phases: vec![Phase::Train; collector.trials()],
             collector,
             bar,
             quiet,
@@ -56,7 +60,6 @@ impl Recorder {
             env_steps: 0,
             live: 0,
             unshown: 0,
-            phase: Phase::Train,
             notes: Vec::new(),
         }
     }
@@ -88,23 +91,39 @@ impl Recorder {
             .unwrap_or(0);
         self.env_steps += duration * u64::from(report.members.count_ones());
         self.unshown += 1;
-        // The collector refused a record of no known phase.
-        self.phase = Phase::from_u8(report.phase).unwrap_or(Phase::Train);
+        // The collector refused a record of no known phase or trial.
+        self.trial_phases[report.trial as usize] =
+            Phase::from_u8(report.phase).unwrap_or(Phase::Train);
         Ok(())
     }
 
-    /// Redraws the progress message, at most a few times a second.
+    /// Training while any trial trains; greedy once every trial evaluates.
+    fn phase(&self) -> Phase {
+        if self.trial_phases.contains(&Phase::Train) {
+            Phase::Train
+        } else {
+            Phase::Eval
+        }
+    }
+
+    /// Redraws the progress message, at most a few times a second, and at once when the
+    /// phase changed: the bar counts every episode as it comes, and a prefix redrawn up to
+    /// 200 ms late would call the greedy episodes that end a run "training" (a learned
+    /// policy's final evaluation is often over in less).
     pub fn redraw(&mut self) {
         self.bar.inc(std::mem::take(&mut self.unshown));
-        if self.last_draw.is_some_and(|last| last.elapsed() < Duration::from_millis(200)) {
+        let phase = self.phase();
+        if self.last_draw.is_some_and(|(last, drawn)| {
+            drawn == phase && last.elapsed() < Duration::from_millis(200)
+        }) {
             return;
         }
-        self.last_draw = Some(Instant::now());
-        self.bar.set_prefix(match self.phase {
+        self.last_draw = Some((Instant::now(), phase));
+        self.bar.set_prefix(match phase {
             Phase::Train => "training",
             Phase::Eval => "greedy",
         });
-        let lengths = uav1_lengths(self.phase, &self.collector);
+        let lengths = uav1_lengths(phase, &self.collector);
         let ticks_per_s =
             self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
         self.bar
@@ -173,30 +192,32 @@ mod tests {
         assert_eq!(uav1_lengths(Phase::Train, &collector), "mean length 20.0");
     }
 
+    /// The bar says "greedy" once every trial evaluates, at the redraw that sees it, even
+    /// within 200 ms of the last one.
     #[test]
-    fn the_progress_counts_greedy_episodes_and_names_the_phase() {
+    fn the_progress_counts_greedy_episodes_and_names_the_phase_at_once() {
         let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
-        let mut recorder = Recorder::new(collector, 4, true);
+        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let mut recorder = Recorder::new(collector, 6, true);
         assert_eq!(recorder.bar.prefix(), "starting");
-        for episode in 0..2 {
-            recorder.record(&report(Phase::Train, episode, 20, false)).unwrap();
-        }
-        recorder.redraw();
-        assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (2, "training".into()));
-        assert!(
-            recorder.bar.message().starts_with("mean length 20.0 "),
-            "{}",
-            recorder.bar.message()
-        );
+        let mut record = |trial: u32, phase, episode, length, truncated| {
+            let report = EpisodeReport { trial, ..report(phase, episode, length, truncated) };
+            recorder.record(&report).unwrap();
+            recorder.redraw();
+            (recorder.bar.position(), recorder.bar.prefix(), recorder.bar.message())
+        };
+        record(0, Phase::Train, 0, 20, false);
+        let (position, prefix, message) = record(1, Phase::Train, 0, 20, false);
+        assert_eq!((position, prefix.as_str()), (2, "training"));
+        assert!(message.starts_with("mean length 20.0 "), "{message}");
 
-        recorder.record(&report(Phase::Eval, 0, 10, false)).unwrap();
-        recorder.record(&report(Phase::Eval, 1, 1000, true)).unwrap();
-        // The message is redrawn at most every 200 ms: let this redraw through.
-        recorder.last_draw = None;
-        recorder.redraw();
-        assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (4, "greedy".into()));
-        let message = recorder.bar.message();
+        // Trial 1 still trains: so does the run.
+        record(0, Phase::Train, 1, 20, false);
+        let (position, prefix, _) = record(0, Phase::Eval, 0, 10, false);
+        assert_eq!((position, prefix.as_str()), (4, "training"));
+        record(1, Phase::Train, 1, 20, false);
+        let (position, prefix, message) = record(1, Phase::Eval, 0, 1000, true);
+        assert_eq!((position, prefix.as_str()), (6, "greedy"));
         assert!(message.starts_with("greedy mean length 505.0, 1 truncated "), "{message}");
     }
 }

@@ -468,6 +468,10 @@ impl Collector {
     pub fn agents(&self) -> usize {
         self.train.len()
     }
+
+    pub fn trials(&self) -> usize {
+        self.ticks.len()
+    }
 }
 
 impl GreedyStats {
