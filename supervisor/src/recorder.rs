@@ -15,18 +15,18 @@ pub struct Recorder {
     bar: ProgressBar,
     quiet: bool,
     started: Instant,
-    /// When the message was last redrawn, and the phase it named; None until the first
+    /// When the message was last redrawn, and the prefix it drew; None until the first
     /// redraw, which is at once.
-    last_draw: Option<(Instant, Phase)>,
+    last_draw: Option<(Instant, &'static str)>,
     env_steps: u64,
     live: usize,
     /// Episodes recorded since the bar last moved: it moves at each redraw, since a move
     /// reads the clock and records come by the thousand.
     unshown: u64,
-    /// The phase of each trial's latest record. The bar names the phase before it: a final
-    /// greedy evaluation of policies that hit the tick cap can take a while after the last
-    /// training episode. Trials go through their episodes at their own pace, so the run is
-    /// training while any of them is.
+    /// The phase of each trial's latest record, or before its first one the phase it
+    /// starts in. The bar names the phase before it: a final greedy evaluation of policies
+    /// that hit the tick cap can take a while after the last training episode. Trials go
+    /// through their episodes at their own pace, so the run is training while any of them is.
     trial_phases: Vec<Phase>,
     /// What went wrong on the way (lost or restarted agents...), for `summary.json`. Kept
     /// here rather than returned by the transport so that a run that fails keeps them too.
@@ -34,8 +34,9 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// `total` is the number of episodes, training and greedy, over every trial.
-    pub fn new(collector: Collector, total: u64, quiet: bool) -> Recorder {
+    /// `total` is the number of episodes, training and greedy, over every trial; `first` is
+    /// the phase the trials start in (greedy when the run only evaluates).
+    pub fn new(collector: Collector, total: u64, first: Phase, quiet: bool) -> Recorder {
         let bar = if quiet {
             ProgressBar::hidden()
         } else {
@@ -48,10 +49,9 @@ impl Recorder {
             .expect("a valid template")
             .progress_chars("=> "),
         );
-        // Until the first record: the processes start and join.
         bar.set_prefix("starting");
         Recorder {
-            trial_phases: vec![Phase::Train; collector.trials()],
+            trial_phases: vec![first; collector.trials()],
             collector,
             bar,
             quiet,
@@ -106,23 +106,31 @@ impl Recorder {
         }
     }
 
+    /// What the bar's prefix says: `starting` until the first record (the processes start
+    /// and join), then the phase.
+    fn prefix(&self) -> &'static str {
+        match self.bar.position() {
+            0 => "starting",
+            _ if self.phase() == Phase::Train => "training",
+            _ => "greedy",
+        }
+    }
+
     /// Redraws the progress message, at most a few times a second, and at once when the
-    /// phase changed: the bar counts every episode as it comes, and a prefix redrawn up to
+    /// prefix changed: the bar counts every episode as it comes, and a prefix redrawn up to
     /// 200 ms late would call the greedy episodes that end a run "training" (a learned
     /// policy's final evaluation is often over in less).
     pub fn redraw(&mut self) {
         self.bar.inc(std::mem::take(&mut self.unshown));
-        let phase = self.phase();
+        let prefix = self.prefix();
         if self.last_draw.is_some_and(|(last, drawn)| {
-            drawn == phase && last.elapsed() < Duration::from_millis(200)
+            drawn == prefix && last.elapsed() < Duration::from_millis(200)
         }) {
             return;
         }
-        self.last_draw = Some((Instant::now(), phase));
-        self.bar.set_prefix(match phase {
-            Phase::Train => "training",
-            Phase::Eval => "greedy",
-        });
+        self.last_draw = Some((Instant::now(), prefix));
+        self.bar.set_prefix(prefix);
+        let phase = self.phase();
         let lengths = uav1_lengths(phase, &self.collector);
         let ticks_per_s =
             self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
@@ -198,7 +206,8 @@ mod tests {
     fn the_progress_counts_greedy_episodes_and_names_the_phase_at_once() {
         let dir = tempfile::tempdir().expect("a scratch directory");
         let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
-        let mut recorder = Recorder::new(collector, 6, true);
+        let mut recorder = Recorder::new(collector, 6, Phase::Train, true);
+        recorder.redraw();
         assert_eq!(recorder.bar.prefix(), "starting");
         let mut record = |trial: u32, phase, episode, length, truncated| {
             let report = EpisodeReport { trial, ..report(phase, episode, length, truncated) };
@@ -219,5 +228,19 @@ mod tests {
         let (position, prefix, message) = record(1, Phase::Eval, 0, 1000, true);
         assert_eq!((position, prefix.as_str()), (6, "greedy"));
         assert!(message.starts_with("greedy mean length 505.0, 1 truncated "), "{message}");
+    }
+
+    /// A run that only evaluates (`supervisor eval`) is greedy from its first record on,
+    /// before every trial has one.
+    #[test]
+    fn an_evaluation_is_greedy_from_its_first_record() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let mut recorder = Recorder::new(collector, 4, Phase::Eval, true);
+        recorder.redraw();
+        assert_eq!(recorder.bar.prefix(), "starting");
+        recorder.record(&report(Phase::Eval, 0, 10, false)).unwrap();
+        recorder.redraw();
+        assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (1, "greedy".into()));
     }
 }

@@ -13,6 +13,7 @@ use crate::results::{Collector, EvalPlan};
 use crate::summary;
 use anyhow::{Context, Result};
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
+use flockstep_proto::Phase;
 use std::path::Path;
 use std::time::Instant;
 
@@ -66,7 +67,8 @@ pub fn run_experiment(config: &RunConfig, stop: &Interrupts) -> Result<Outcome> 
     // length: `RunConfig::resolve` refuses counts past `u64`.
     let per_trial = plan.greedy_episodes(e.eval_episodes).unwrap_or(u64::MAX);
     let total = per_trial.saturating_add(e.train_episodes).saturating_mul(config.trials as u64);
-    let mut recorder = Recorder::new(collector, total, config.quiet);
+    let first = if e.train_episodes > 0 { Phase::Train } else { Phase::Eval };
+    let mut recorder = Recorder::new(collector, total, first, config.quiet);
     let started = Instant::now();
     let result = match config.transport {
         Transport::Inproc => crate::inproc::run(config, &mut recorder, stop)
