@@ -107,12 +107,12 @@ impl Recorder {
     }
 
     /// What the bar's prefix says: `starting` until the first record (the processes start
-    /// and join), then the phase.
-    fn prefix(&self) -> &'static str {
-        match self.bar.position() {
-            0 => "starting",
-            _ if self.phase() == Phase::Train => "training",
-            _ => "greedy",
+    /// and join), then `phase`.
+    fn prefix(&self, phase: Phase) -> &'static str {
+        match (self.bar.position(), phase) {
+            (0, _) => "starting",
+            (_, Phase::Train) => "training",
+            (_, Phase::Eval) => "greedy",
         }
     }
 
@@ -122,7 +122,8 @@ impl Recorder {
     /// policy's final evaluation is often over in less).
     pub fn redraw(&mut self) {
         self.bar.inc(std::mem::take(&mut self.unshown));
-        let prefix = self.prefix();
+        let phase = self.phase();
+        let prefix = self.prefix(phase);
         if self.last_draw.is_some_and(|(last, drawn)| {
             drawn == prefix && last.elapsed() < Duration::from_millis(200)
         }) {
@@ -130,7 +131,6 @@ impl Recorder {
         }
         self.last_draw = Some((Instant::now(), prefix));
         self.bar.set_prefix(prefix);
-        let phase = self.phase();
         let lengths = uav1_lengths(phase, &self.collector);
         let ticks_per_s =
             self.collector.ticks() as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
@@ -200,15 +200,22 @@ mod tests {
         assert_eq!(uav1_lengths(Phase::Train, &collector), "mean length 20.0");
     }
 
+    /// A recorder of one agent and two trials starting in `first`, redrawn once before any
+    /// record: it says `starting`. The directory holds its CSV files.
+    fn two_trial_recorder(total: u64, first: Phase) -> (tempfile::TempDir, Recorder) {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let mut recorder = Recorder::new(collector, total, first, true);
+        recorder.redraw();
+        assert_eq!(recorder.bar.prefix(), "starting");
+        (dir, recorder)
+    }
+
     /// The bar says "greedy" once every trial evaluates, at the redraw that sees it, even
     /// within 200 ms of the last one.
     #[test]
     fn the_progress_counts_greedy_episodes_and_names_the_phase_at_once() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
-        let mut recorder = Recorder::new(collector, 6, Phase::Train, true);
-        recorder.redraw();
-        assert_eq!(recorder.bar.prefix(), "starting");
+        let (_dir, mut recorder) = two_trial_recorder(6, Phase::Train);
         let mut record = |trial: u32, phase, episode, length, truncated| {
             let report = EpisodeReport { trial, ..report(phase, episode, length, truncated) };
             recorder.record(&report).unwrap();
@@ -234,11 +241,7 @@ mod tests {
     /// before every trial has one.
     #[test]
     fn an_evaluation_is_greedy_from_its_first_record() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
-        let mut recorder = Recorder::new(collector, 4, Phase::Eval, true);
-        recorder.redraw();
-        assert_eq!(recorder.bar.prefix(), "starting");
+        let (_dir, mut recorder) = two_trial_recorder(4, Phase::Eval);
         recorder.record(&report(Phase::Eval, 0, 10, false)).unwrap();
         recorder.redraw();
         assert_eq!((recorder.bar.position(), recorder.bar.prefix()), (1, "greedy".into()));
