@@ -299,10 +299,10 @@ impl Collector {
     /// Records one finished episode of one trial.
     pub fn record(&mut self, report: &EpisodeReport) -> Result<()> {
         let trial = report.trial as usize;
-        if trial >= self.ticks.len() {
+        if trial >= self.trials() {
             anyhow::bail!(
                 "episode report for trial {trial}, but the run has {} trials",
-                self.ticks.len()
+                self.trials()
             );
         }
         let phase = Phase::from_u8(report.phase)
@@ -375,7 +375,7 @@ impl Collector {
 
     /// Makes room for `agents` agents: those the run starts with, and any that join later.
     fn grow(&mut self, agents: usize) {
-        let trials = self.ticks.len();
+        let trials = self.trials();
         self.train.resize(agents, vec![Flown::default(); trials]);
         self.train_truncated.resize(agents, 0);
         self.greedy.resize(agents, vec![(0, 0, 0); trials]);
@@ -469,6 +469,7 @@ impl Collector {
         self.train.len()
     }
 
+    /// The run's trial count: each trial has its entry in `ticks`.
     pub fn trials(&self) -> usize {
         self.ticks.len()
     }
@@ -511,6 +512,17 @@ mod tests {
             vec![13],
             "the bad report was not recorded"
         );
+    }
+
+    /// A report of a trial the run does not have (the world sent a bad record) is an error
+    /// naming the trial and the run's count, and nothing is recorded.
+    #[test]
+    fn a_report_of_an_unknown_trial_is_an_error_naming_the_count() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let error = collector.record(&report(2, Phase::Train, 0)).unwrap_err().to_string();
+        assert_eq!(error, "episode report for trial 2, but the run has 2 trials");
+        assert_eq!(collector.ticks(), 0, "the bad report was not recorded");
     }
 
     #[test]
