@@ -15,9 +15,9 @@ pub struct Recorder {
     bar: ProgressBar,
     quiet: bool,
     started: Instant,
-    /// When the message was last redrawn, and the prefix it drew; None until the first
-    /// redraw, which is at once.
-    last_draw: Option<(Instant, &'static str)>,
+    /// When the message was last redrawn, the prefix it drew and whether the bar was full;
+    /// None until the first redraw, which is at once.
+    last_draw: Option<(Instant, &'static str, bool)>,
     env_steps: u64,
     live: usize,
     /// Episodes recorded since the bar last moved: it moves at each redraw, since a move
@@ -37,11 +37,9 @@ impl Recorder {
     /// `total` is the number of episodes, training and greedy, over every trial; `first` is
     /// the phase the trials start in (greedy when the run only evaluates).
     pub fn new(collector: Collector, total: u64, first: Phase, quiet: bool) -> Recorder {
-        let bar = if quiet {
-            ProgressBar::hidden()
-        } else {
-            ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
-        };
+        let target =
+            if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() };
+        let bar = ProgressBar::with_draw_target(Some(total), target);
         bar.set_style(
             ProgressStyle::with_template(
                 "{elapsed_precise} {prefix:8} [{bar:30}] {pos}/{len} episodes  {msg}",
@@ -117,19 +115,21 @@ impl Recorder {
     }
 
     /// Redraws the progress message, at most a few times a second, and at once when the
-    /// prefix changed: the bar counts every episode as it comes, and a prefix redrawn up to
-    /// 200 ms late would call the greedy episodes that end a run "training" (a learned
-    /// policy's final evaluation is often over in less).
+    /// prefix changed or the bar became full: the bar counts every episode as it comes, and
+    /// a prefix redrawn up to 200 ms late would call the greedy episodes that end a run
+    /// "training" (a learned policy's final evaluation is often over in less), while a full
+    /// bar would show the greedy mean of up to 200 ms before the last episode.
     pub fn redraw(&mut self) {
         self.bar.inc(std::mem::take(&mut self.unshown));
         let phase = self.phase();
         let prefix = self.prefix(phase);
-        if self.last_draw.is_some_and(|(last, drawn)| {
-            drawn == prefix && last.elapsed() < Duration::from_millis(200)
+        let full = self.bar.length() == Some(self.bar.position());
+        if self.last_draw.is_some_and(|(last, drawn, was_full)| {
+            (drawn, was_full) == (prefix, full) && last.elapsed() < Duration::from_millis(200)
         }) {
             return;
         }
-        self.last_draw = Some((Instant::now(), prefix));
+        self.last_draw = Some((Instant::now(), prefix, full));
         self.bar.set_prefix(prefix);
         let lengths = uav1_lengths(phase, &self.collector);
         let ticks_per_s =
@@ -235,6 +235,23 @@ mod tests {
         let (position, prefix, message) = record(1, Phase::Eval, 0, 1000, true);
         assert_eq!((position, prefix.as_str()), (6, "greedy"));
         assert!(message.starts_with("greedy mean length 505.0, 1 truncated "), "{message}");
+    }
+
+    /// The record that fills the bar is shown at once, however soon after the last redraw:
+    /// the last frame before the bar clears has the final greedy mean, not one of up to
+    /// 200 ms before.
+    #[test]
+    fn the_record_that_fills_the_bar_is_shown_at_once() {
+        let (_dir, mut recorder) = two_trial_recorder(3, Phase::Eval);
+        for (trial, episode, length) in [(0, 0, 10), (1, 0, 20), (0, 1, 60)] {
+            let report = EpisodeReport { trial, ..report(Phase::Eval, episode, length, false) };
+            recorder.record(&report).unwrap();
+            recorder.redraw();
+        }
+        assert_eq!(recorder.bar.position(), 3);
+        // The mean of the trials' means: (10 + 60) / 2 and 20.
+        let message = recorder.bar.message();
+        assert!(message.starts_with("greedy mean length 27.5, 0 truncated "), "{message}");
     }
 
     /// A run that only evaluates (`supervisor eval`) is greedy from its first record on,
