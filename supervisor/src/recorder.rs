@@ -238,8 +238,8 @@ mod tests {
     }
 
     /// The record that fills the bar is shown at once, however soon after the last redraw:
-    /// the last frame before the bar clears has the final greedy mean, not one of up to
-    /// 200 ms before.
+    /// the frame of the full bar has the final greedy mean, not one of up to 200 ms before
+    /// (the multi-process supervisor redraws after every drain of the world's records).
     #[test]
     fn the_record_that_fills_the_bar_is_shown_at_once() {
         let (_dir, mut recorder) = two_trial_recorder(3, Phase::Eval);
