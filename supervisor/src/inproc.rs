@@ -100,6 +100,8 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
             recorder.redraw();
         }
     };
+    // The episodes of the rounds since the last look: the bar shows where the run ended.
+    recorder.redraw();
     // Every agent's tables are written that can be; then a failure fails the run, as a lost
     // result (an agent process that cannot write its tables fails a multi-process run too).
     let mut unsaved = Vec::new();
@@ -110,4 +112,39 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
     }
     anyhow::ensure!(unsaved.is_empty(), "final Q-tables not all saved: {}", unsaved.join("; "));
     Ok(finished)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::{Collector, EvalPlan};
+    use clap::Parser;
+    use flockstep_proto::Phase;
+    use indicatif::{InMemoryTerm, ProgressDrawTarget};
+
+    /// The rounds after the last look at the progress still count: once the run has ended
+    /// the bar shows every episode, drawn at once.
+    #[test]
+    fn the_bar_shows_every_episode_once_the_run_has_ended() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let out = dir.path().to_str().expect("a UTF-8 path");
+        let setup = ["--transport", "inproc", "--scenario", "s1", "--uavs", "1", "--trials", "1"];
+        let length = ["--episodes", "300", "--eval-episodes", "0", "--seed", "7", "--out", out];
+        let flags = ["supervisor"].iter().chain(&setup).chain(&length);
+        let cli = crate::cli::Cli::try_parse_from(flags).expect("valid flags");
+        let config = RunConfig::resolve(&cli.run).expect("a valid run");
+        let collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
+        let terminal = InMemoryTerm::new(2, 200);
+        let target = ProgressDrawTarget::term_like_with_hz(Box::new(terminal.clone()), 1);
+        let mut recorder = Recorder::drawing_to(target, collector, 300, Phase::Train, false);
+
+        let finished = run(&config, &mut recorder, &Interrupts::default()).expect("a run");
+
+        assert!(finished, "the run was not stopped");
+        let screen = terminal.contents();
+        assert!(
+            screen.contains("] 300/300 episodes  mean length "),
+            "the bar does not show the run's last episode; the terminal shows:\n{screen}"
+        );
+    }
 }

@@ -319,6 +319,7 @@ impl Fleet<'_> {
             }
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
+                recorder.redraw();
                 if self.world.brought_down() {
                     let why = stopped_at_once.unwrap_or("stopped at once");
                     return self.finish_hurrying(status, why, recorder);
