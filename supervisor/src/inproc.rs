@@ -120,7 +120,6 @@ mod tests {
     use crate::results::{Collector, EvalPlan};
     use clap::Parser;
     use flockstep_proto::Phase;
-    use indicatif::{InMemoryTerm, ProgressDrawTarget};
 
     /// The rounds after the last look at the progress still count: once the run has ended
     /// the bar shows every episode, drawn at once.
@@ -134,9 +133,7 @@ mod tests {
         let cli = crate::cli::Cli::try_parse_from(flags).expect("valid flags");
         let config = RunConfig::resolve(&cli.run).expect("a valid run");
         let collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
-        let terminal = InMemoryTerm::new(2, 200);
-        let target = ProgressDrawTarget::term_like_with_hz(Box::new(terminal.clone()), 1);
-        let mut recorder = Recorder::drawing_to(target, collector, 300, Phase::Train, false);
+        let (mut recorder, terminal) = Recorder::on_test_terminal(collector, 300, Phase::Train);
 
         let finished = run(&config, &mut recorder, &Interrupts::default()).expect("a run");
 

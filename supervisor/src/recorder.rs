@@ -42,8 +42,8 @@ impl Recorder {
         Recorder::drawing_to(target, collector, total, first, quiet)
     }
 
-    /// [`Recorder::new`] drawing its bar to `target` (a test's in-memory terminal).
-    pub(crate) fn drawing_to(
+    /// [`Recorder::new`] drawing its bar to `target`.
+    fn drawing_to(
         target: ProgressDrawTarget,
         collector: Collector,
         total: u64,
@@ -71,6 +71,20 @@ impl Recorder {
             unshown: 0,
             notes: Vec::new(),
         }
+    }
+
+    /// A recorder whose bar draws to a terminal in memory, for the tests of what it shows.
+    /// The terminal takes one draw a second once the rate limit's burst is spent, as a long
+    /// run spends it.
+    #[cfg(test)]
+    pub(crate) fn on_test_terminal(
+        collector: Collector,
+        total: u64,
+        first: Phase,
+    ) -> (Recorder, indicatif::InMemoryTerm) {
+        let terminal = indicatif::InMemoryTerm::new(2, 200);
+        let target = ProgressDrawTarget::term_like_with_hz(Box::new(terminal.clone()), 1);
+        (Recorder::drawing_to(target, collector, total, first, false), terminal)
     }
 
     /// Prints `line` on stderr above the progress bar, unless the run is quiet.
@@ -197,7 +211,6 @@ fn uav1_lengths(phase: Phase, collector: &Collector) -> String {
 mod tests {
     use super::*;
     use crate::results::EvalPlan;
-    use indicatif::InMemoryTerm;
 
     fn report(phase: Phase, episode: u64, length: u32, truncated: bool) -> EpisodeReport {
         let mut report = EpisodeReport { phase: phase as u8, episode, ..Default::default() };
@@ -263,12 +276,10 @@ mod tests {
     /// to 200 ms before.
     #[test]
     fn the_record_that_fills_the_bar_is_drawn_at_once() {
-        let terminal = InMemoryTerm::new(2, 200);
-        // One draw a second once the burst is spent, as a long run spends it.
-        let target = ProgressDrawTarget::term_like_with_hz(Box::new(terminal.clone()), 1);
         let dir = tempfile::tempdir().expect("a scratch directory");
         let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
-        let mut recorder = Recorder::drawing_to(target, collector, 3, Phase::Eval, false);
+        let (mut recorder, terminal) = Recorder::on_test_terminal(collector, 3, Phase::Eval);
+        // Spends the burst.
         for _ in 0..100 {
             recorder.bar.tick();
         }
