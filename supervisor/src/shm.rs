@@ -208,7 +208,8 @@ impl Fleet<'_> {
     }
 
     /// Records the episode reports the world has sent, and follows through its changes of
-    /// membership where each agent process stands in the barrier.
+    /// membership where each agent process stands in the barrier; then redraws the progress,
+    /// so the bar shows what every drain found, the last one too.
     fn record_reports(&mut self, ports: &SupervisorPorts, recorder: &mut Recorder) -> Result<()> {
         while let Some(next) = ports.try_next()? {
             match next {
@@ -231,6 +232,7 @@ impl Fleet<'_> {
                 }
             }
         }
+        recorder.redraw();
         Ok(())
     }
 
@@ -279,7 +281,6 @@ impl Fleet<'_> {
         let mut stopped_at_once: Option<&str> = None;
         loop {
             self.record_reports(ports, recorder)?;
-            recorder.redraw();
             if stop.stop_asked() && control.stop == 0 {
                 control.stop = 1;
                 ports.send_control(&control)?;
@@ -319,7 +320,6 @@ impl Fleet<'_> {
             }
             if let Some(status) = self.world.status()? {
                 self.record_reports(ports, recorder)?;
-                recorder.redraw();
                 if self.world.brought_down() {
                     let why = stopped_at_once.unwrap_or("stopped at once");
                     return self.finish_hurrying(status, why, recorder);
