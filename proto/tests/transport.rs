@@ -408,14 +408,38 @@ fn spawn_child(
     panic!("{role} child exited ({status}) before getting ready; stdout:\n{seen}");
 }
 
-/// Taken by the tests that leave a dead node and look at it before they clean it, and by
-/// those that sweep: a sweep cleans the dead nodes of every run on the machine, so run in
-/// parallel it would clean another test's before that one looked.
-static DEAD_NODES: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// [`DEAD_NODES`], also after a test that held it failed.
-fn dead_nodes_lock() -> std::sync::MutexGuard<'static, ()> {
-    DEAD_NODES.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+/// A lock taken by the tests that leave a dead node and look at it before they clean it, and by
+/// those that sweep: a sweep cleans the dead nodes of every run of this user, so run in
+/// parallel it would clean another test's before that one looked. A lock on a file rather
+/// than a mutex, so that it also holds between copies of this test binary run at the same
+/// time (each open of the file is locked apart, so threads of one process exclude each other
+/// too). A supervisor started meanwhile sweeps as well, without asking: the tests that
+/// start supervisors (the workspace's integration tests) must not run beside these.
+///
+/// Returns the locked file, whose closing releases the lock; gives up after a bound long
+/// enough for every other holder's tests.
+fn dead_nodes_lock() -> std::fs::File {
+    const WAIT: Duration = Duration::from_secs(300);
+    // SAFETY: geteuid takes no arguments and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    let path = std::env::temp_dir().join(format!("flockstep-dead-node-tests-{uid}.lock"));
+    let file = std::fs::File::create(&path)
+        .unwrap_or_else(|e| panic!("cannot open the lock file {}: {e}", path.display()));
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        match file.try_lock() {
+            Ok(()) => return file,
+            Err(std::fs::TryLockError::WouldBlock) if std::time::Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(std::fs::TryLockError::WouldBlock) => {
+                panic!("another test held the lock on {} for {WAIT:?}", path.display())
+            }
+            Err(std::fs::TryLockError::Error(e)) => {
+                panic!("cannot lock {}: {e}", path.display())
+            }
+        }
+    }
 }
 
 /// Cleans `config`'s run and checks that `dead_nodes` dead nodes were removed, none is left
@@ -739,7 +763,12 @@ fn a_dead_node_that_cannot_be_removed_counts_as_live() {
     for file in &left {
         std::fs::remove_file(file).unwrap();
     }
-    std::fs::remove_dir(&node_dir).unwrap();
+    // Emptied, the directory of a dead process is anyone's to remove (another test's clean-up
+    // may have done it already).
+    match std::fs::remove_dir(&node_dir) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => panic!("{}: {e}", node_dir.display()),
+        _ => {}
+    }
     assert_eq!((cleaned.dead_nodes, cleaned.live_nodes), (0, 1), "{cleaned:?}");
     let counter = |file: &&std::path::PathBuf| file.to_string_lossy().ends_with(".global_mgmt");
     assert!(left.iter().any(|file| counter(&file)), "the node-id counter went: {left:#?}");
