@@ -136,6 +136,13 @@ fn bad_run_ids_are_errors_not_panics() {
     }
 }
 
+/// The user this test process runs as. Read here, not taken from the crate: the test of the
+/// root checks the crate's choice against it.
+fn effective_uid() -> u32 {
+    // SAFETY: geteuid takes no arguments and cannot fail.
+    unsafe { libc::geteuid() }
+}
+
 /// iceoryx2's shared default root (`/tmp/iceoryx2`) belongs to whichever user made it first;
 /// a run keeps its node, service and socket files in this user's own private root instead.
 #[test]
@@ -143,8 +150,7 @@ fn a_run_keeps_its_files_in_this_users_private_root() {
     let config = run("root");
     let _world = RunServices::create(&config).unwrap().into_world().unwrap();
     let root = iceoryx_root();
-    // SAFETY: geteuid takes no arguments and cannot fail.
-    let uid = unsafe { libc::geteuid() };
+    let uid = effective_uid();
     assert_eq!(root, std::path::PathBuf::from(format!("/tmp/flockstep-{uid}")));
     let meta = std::fs::symlink_metadata(&root).unwrap();
     assert!(meta.is_dir(), "{}", root.display());
@@ -420,8 +426,7 @@ fn spawn_child(
 /// enough for every other holder's tests.
 fn dead_nodes_lock() -> std::fs::File {
     const WAIT: Duration = Duration::from_secs(300);
-    // SAFETY: geteuid takes no arguments and cannot fail.
-    let uid = unsafe { libc::geteuid() };
+    let uid = effective_uid();
     let path = std::env::temp_dir().join(format!("flockstep-dead-node-tests-{uid}.lock"));
     let file = std::fs::File::create(&path)
         .unwrap_or_else(|e| panic!("cannot open the lock file {}: {e}", path.display()));
