@@ -220,12 +220,18 @@ mod tests {
         report
     }
 
+    /// A collector of one agent and two trials; the directory holds its CSV files.
+    fn two_trial_collector() -> (tempfile::TempDir, Collector) {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        (dir, collector)
+    }
+
     /// Before UAV1 has finished an episode its mean length is `-`, in training and in an
     /// evaluation alike.
     #[test]
     fn no_mean_length_is_shown_before_uav1_finished_an_episode() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = two_trial_collector();
         for phase in [Phase::Train, Phase::Eval] {
             assert_eq!(uav1_lengths(phase, &collector), "mean length -", "{phase:?}");
         }
@@ -236,8 +242,7 @@ mod tests {
     /// A recorder of one agent and two trials starting in `first`, redrawn once before any
     /// record: it says `starting`. The directory holds its CSV files.
     fn two_trial_recorder(total: u64, first: Phase) -> (tempfile::TempDir, Recorder) {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (dir, collector) = two_trial_collector();
         let mut recorder = Recorder::new(collector, total, first, true);
         recorder.redraw();
         assert_eq!(recorder.bar.prefix(), "starting");
@@ -276,8 +281,7 @@ mod tests {
     /// to 200 ms before.
     #[test]
     fn the_record_that_fills_the_bar_is_drawn_at_once() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (_dir, collector) = two_trial_collector();
         let (mut recorder, terminal) = Recorder::on_test_terminal(collector, 3, Phase::Eval);
         // Spends the burst.
         for _ in 0..100 {
