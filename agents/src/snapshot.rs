@@ -16,6 +16,13 @@ use std::path::{Path, PathBuf};
 /// Format version; bump when the layout changes. 2: the map's canonical text.
 pub const FORMAT: u32 = 2;
 
+/// Most bytes a snapshot may decode to. bincode allocates a text field as long as the file
+/// says before it reads the text, so without a bound one damaged length asks for up to
+/// 2^64 bytes and the process aborts. Decoding counts 8 bytes for every number, however
+/// few it takes in the file, so files up to 128 MiB read; a snapshot of the thesis's
+/// scenarios takes about 40 KB.
+const DECODE_LIMIT: usize = 1 << 30;
+
 /// What an agent's tables are learned on, and what a snapshot it loads must have been
 /// learned on too.
 #[derive(Debug, Clone, Copy)]
@@ -51,7 +58,9 @@ pub struct Snapshot {
 pub enum SnapshotError {
     #[error("not a flockstep Q-table snapshot: {0}")]
     Decode(String),
-    #[error("snapshot format {found}, this build reads format {FORMAT}")]
+    /// A file of another build's format, or not a snapshot at all: neither has a format
+    /// number this build reads where the number goes.
+    #[error("not a snapshot this build reads: it starts with format number {found}, this build reads format {FORMAT}")]
     Format { found: u32 },
     #[error("snapshot was learned with {what} `{found}`, this agent uses `{expected}`")]
     Mismatch { what: &'static str, found: String, expected: String },
@@ -87,13 +96,19 @@ impl Snapshot {
             .expect("a snapshot holds only plain data")
     }
 
+    /// Reads a snapshot from a file's bytes. The format number, which every format puts
+    /// first, is checked before the rest is decoded: a file of another format is laid out
+    /// differently and would otherwise fail on some field in its middle.
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
-        let (snapshot, _): (Snapshot, usize) =
-            bincode::serde::decode_from_slice(bytes, bincode::config::standard())
-                .map_err(|e| SnapshotError::Decode(decode_cause(&e)))?;
-        if snapshot.format != FORMAT {
-            return Err(SnapshotError::Format { found: snapshot.format });
+        let decode_error = |e: bincode::error::DecodeError| SnapshotError::Decode(decode_cause(&e));
+        let config = bincode::config::standard().with_limit::<DECODE_LIMIT>();
+        let (format, _): (u32, usize) =
+            bincode::decode_from_slice(bytes, config).map_err(decode_error)?;
+        if format != FORMAT {
+            return Err(SnapshotError::Format { found: format });
         }
+        let (snapshot, _): (Snapshot, usize) =
+            bincode::serde::decode_from_slice(bytes, config).map_err(decode_error)?;
         Ok(snapshot)
     }
 
@@ -166,7 +181,10 @@ fn decode_cause(error: &bincode::error::DecodeError) -> String {
             format!("no {type_name} is numbered {found}")
         }
         DecodeError::LimitExceeded | DecodeError::OutsideUsizeRange(_) => {
-            "a length too large for this machine".to_string()
+            format!(
+                "a length field asks for more than the {} GiB a snapshot may hold",
+                DECODE_LIMIT >> 30
+            )
         }
         DecodeError::Other(message) => message.to_string(),
         DecodeError::OtherString(message) => message.clone(),
@@ -586,8 +604,47 @@ mod tests {
     fn a_damaged_snapshot_is_an_error_naming_its_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = write(&uav1(), dir.path());
-        std::fs::write(&path, b"not a snapshot").unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.truncate(bytes.len() / 2);
+        std::fs::write(&path, bytes).unwrap();
         let err = read_snapshot(&path).unwrap_err().to_string();
-        assert!(err.contains("uav1_trial0.bin") && err.contains("not a flockstep"), "{err}");
+        assert_eq!(err, format!("{}: not a flockstep Q-table snapshot: truncated", path.display()));
+    }
+
+    /// A file that is not a snapshot at all says what it starts with: here the text's `n`.
+    #[test]
+    fn a_file_of_text_is_refused_by_its_first_byte() {
+        let err = Snapshot::decode(b"not a snapshot").unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "not a snapshot this build reads: it starts with format number 110, this build \
+             reads format 2"
+        );
+    }
+
+    /// A snapshot of another format is refused by its number before any other field is
+    /// read: format 1 had no map, so its fields would fail in the middle, for a reason that
+    /// says nothing of the format. Here everything after the number is cut.
+    #[test]
+    fn a_snapshot_of_another_format_is_refused_before_its_fields_are_read() {
+        let mut bytes = encode_snapshot(&uav1().trials()[0], 0, &s3());
+        assert_eq!(bytes[0], 2, "the format number leads, in one byte");
+        bytes[0] = 1;
+        let err = Snapshot::decode(&bytes[..1]).unwrap_err().to_string();
+        assert_eq!(err, "not a snapshot this build reads: it starts with format number 1, this build reads format 2");
+    }
+
+    /// A damaged length field of a text (here the scenario name's, asking for 2^62 bytes) is
+    /// an error. Before, bincode allocated what it asked for and the process aborted.
+    #[test]
+    fn a_length_past_the_decode_limit_is_an_error_not_an_abort() {
+        let mut bytes = vec![2, 253]; // format 2, then a length in the next 8 bytes
+        bytes.extend_from_slice(&(1u64 << 62).to_le_bytes());
+        let err = Snapshot::decode(&bytes).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "not a flockstep Q-table snapshot: a length field asks for more than the 1 GiB a \
+             snapshot may hold"
+        );
     }
 }
