@@ -78,21 +78,22 @@ fn a_tree_past_the_command_limit_names_the_node_at_fault() {
     assert_eq!(line, expected);
 }
 
-/// A replay lists every action it ticks, so a tree that may tick more than a million in one
+/// A replay lists every leaf it ticks, so a tree that may tick more than a million in one
 /// tick is refused up front (three nested `REPEAT n=1000`, a billion ticks, used to run
-/// until memory ran out).
+/// until memory ran out). The leaf is a condition, which issues no command: counting
+/// commands alone let this tree through.
 #[test]
 fn replay_refuses_a_tree_that_could_tick_without_bound() {
     let dir = crate::harness::scratch();
     let (tree, script) = (dir.path().join("endless.bt"), dir.path().join("endless.script"));
-    let nested = "REPEAT 1 n=1000\n- REPEAT 1 n=1000\n-- REPEAT 1 n=1000\n--- A-step 0\n";
+    let nested = "REPEAT 1 n=1000\n- REPEAT 1 n=1000\n-- REPEAT 1 n=1000\n--- C-ready 0\n";
     std::fs::write(&tree, nested).expect("write the tree");
-    std::fs::write(&script, "step=S\n").expect("write the script");
+    std::fs::write(&script, "ready=S\n").expect("write the script");
     let args = ["bt", "replay", tree.to_str().expect("path"), script.to_str().expect("path")];
     let (out, report) = crate::harness::run_fail(crate::harness::AGENT, &args);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains(":1: this REPEAT n=1000 may issue up to 1000000000 commands in one tick; the limit is 1000000"),
+        stderr.contains(":1: this REPEAT n=1000 may tick up to 1000000000 leaves in one tick; the limit is 1000000"),
         "{report}"
     );
 }

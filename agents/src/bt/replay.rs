@@ -17,8 +17,8 @@
 //! result is an error that names the script line. Learning selectors order their children
 //! greedily by all-zero Q-values, so ties are broken by the seeded RNG (`--seed`) and the
 //! replay is repeatable.
-//! The leaves command no UAV, so a run's limit of commands per tick does not apply here; a
-//! replay refuses a tree that may tick more than `MAX_REPLAY_ACTIONS` actions in one tick.
+//! The leaves command no UAV, so a run's limits per tick do not apply here; a replay refuses
+//! a tree that may tick more than `MAX_REPLAY_LEAVES` leaves in one tick.
 //!
 //! Output, one line per tick (`name@line` is the node's line in the tree file):
 //!

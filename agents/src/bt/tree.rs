@@ -57,11 +57,12 @@ pub enum TraceEvent {
 pub enum TreeError {
     /// `line` and `node` name the deepest node whose own worst case is past the limit (a
     /// `REPEAT` count, or a composite whose children together are): the one to change.
-    #[error("{file}:{line}: this {node} may issue up to {worst} commands in one tick{}; the limit is {limit}", whole_tree(*.worst, *.tree_worst))]
-    TooManyCommands {
+    #[error("{file}:{line}: this {node} may {} up to {worst} {} in one tick{}; the limit is {limit}", .counted.verb(), .counted.noun(), whole_tree(*.worst, *.tree_worst))]
+    TooMuchInOneTick {
         file: String,
         line: usize,
         node: String,
+        counted: PerTick,
         worst: u64,
         tree_worst: u64,
         limit: usize,
@@ -70,10 +71,41 @@ pub enum TreeError {
     WideLearningSelector { file: String, line: usize, children: usize, limit: usize },
 }
 
-/// Most actions one tick of `agent bt replay` may run: a replay lists every leaf it ticks,
-/// so a `REPEAT n=4294967295` would otherwise run out of memory. Far past any tree of the
-/// thesis, which ticks a handful.
-pub const MAX_REPLAY_ACTIONS: usize = 1_000_000;
+/// Most leaves one tick of `agent bt replay` may tick: a replay lists every leaf it ticks,
+/// so three nested `REPEAT n=1000` would otherwise run out of memory. Far past any tree of
+/// the thesis, which ticks a handful.
+pub const MAX_REPLAY_LEAVES: usize = 1_000_000;
+
+/// Most leaves, conditions included, one tick of a run may tick. A condition issues no
+/// command, so loops over conditions alone pass [`MAX_COMMANDS`]: three nested
+/// `RETRY n=1000` over a condition that fails would tick it a billion times in one tick,
+/// while every process of the barrier waits. Far past any tree of the thesis.
+pub const MAX_LEAF_TICKS: usize = 1024;
+
+/// What a tick's worst case counts, for the engine's limits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PerTick {
+    /// Commands to the UAV: one per action ticked.
+    Commands,
+    /// Leaves ticked: actions and conditions.
+    Leaves,
+}
+
+impl PerTick {
+    fn verb(self) -> &'static str {
+        match self {
+            PerTick::Commands => "issue",
+            PerTick::Leaves => "tick",
+        }
+    }
+
+    fn noun(self) -> &'static str {
+        match self {
+            PerTick::Commands => "commands",
+            PerTick::Leaves => "leaves",
+        }
+    }
+}
 
 /// Most children a learning selector may have: a tick keeps the children it tried in one
 /// word. (Its Q-table has a column per child; 64 actions is far past any tree of the thesis.)
@@ -161,31 +193,37 @@ impl Tree {
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
-        check_commands(spec, MAX_COMMANDS)?;
-        Tree::for_replay(spec, params, rng)
+        Tree::check(spec)?;
+        Ok(Tree::build(spec, params, rng))
     }
 
     /// Builds a tree whose actions command no UAV (`agent bt replay` answers them from a
-    /// script), so the run's limit of commands per tick does not apply; the learning
-    /// selector width, which the engine itself needs, is checked, and so is
-    /// [`MAX_REPLAY_ACTIONS`], which bounds what a replay's tick does and lists.
+    /// script), so the run's limits per tick do not apply; the learning selector width,
+    /// which the engine itself needs, is checked, and so is [`MAX_REPLAY_LEAVES`], which
+    /// bounds what a replay's tick does and lists.
     pub fn for_replay(
         spec: &TreeSpec,
         params: LearnParams,
         rng: Xoshiro256PlusPlus,
     ) -> Result<Tree, TreeError> {
         check_width(spec)?;
-        check_commands(spec, MAX_REPLAY_ACTIONS)?;
-        let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
-        shape.flatten(&spec.root, &mut 0);
-        Ok(Tree::with_shape(Arc::new(shape), params, rng))
+        check_per_tick(spec, PerTick::Leaves, MAX_REPLAY_LEAVES)?;
+        Ok(Tree::build(spec, params, rng))
     }
 
-    /// Whether the tree fits the engine's limits (commands per tick, learning selector
-    /// width). [`Tree::new`] checks this too; a run checks it before it starts any process.
+    /// Whether the tree fits the engine's limits (commands and leaves per tick, learning
+    /// selector width). [`Tree::new`] checks this too; a run checks it before it starts any
+    /// process.
     pub fn check(spec: &TreeSpec) -> Result<(), TreeError> {
-        check_commands(spec, MAX_COMMANDS)?;
+        check_per_tick(spec, PerTick::Commands, MAX_COMMANDS)?;
+        check_per_tick(spec, PerTick::Leaves, MAX_LEAF_TICKS)?;
         check_width(spec)
+    }
+
+    fn build(spec: &TreeSpec, params: LearnParams, rng: Xoshiro256PlusPlus) -> Tree {
+        let mut shape = Shape { nodes: Vec::new(), children: Vec::new(), labels: Vec::new() };
+        shape.flatten(&spec.root, &mut 0);
+        Tree::with_shape(Arc::new(shape), params, rng)
     }
 
     /// A new, untrained copy of this tree with its own RNG, sharing the shape.
@@ -682,15 +720,16 @@ fn random_untried(tried: u64, remaining: u32, rng: &mut Xoshiro256PlusPlus) -> u
     }
 }
 
-/// Refuses a tree that may issue more than `limit` commands in one tick: a run's
-/// [`MAX_COMMANDS`] (what an action message holds), or a replay's [`MAX_REPLAY_ACTIONS`].
-fn check_commands(spec: &TreeSpec, limit: usize) -> Result<(), TreeError> {
-    let (tree_worst, culprit) = worst_case_commands(&spec.root, limit as u64);
+/// Refuses a tree whose tick may count more than `limit`: a run's [`MAX_COMMANDS`] (what an
+/// action message holds) and [`MAX_LEAF_TICKS`], or a replay's [`MAX_REPLAY_LEAVES`].
+fn check_per_tick(spec: &TreeSpec, counted: PerTick, limit: usize) -> Result<(), TreeError> {
+    let (tree_worst, culprit) = worst_case(&spec.root, counted, limit as u64);
     match culprit {
-        Some((node, worst)) => Err(TreeError::TooManyCommands {
+        Some((node, worst)) => Err(TreeError::TooMuchInOneTick {
             file: spec.source.clone(),
             line: node.line,
             node: node.kind.label(),
+            counted,
             worst,
             tree_worst,
             limit,
@@ -699,7 +738,7 @@ fn check_commands(spec: &TreeSpec, limit: usize) -> Result<(), TreeError> {
     }
 }
 
-/// What a [`TreeError::TooManyCommands`] adds when the node it names is not the root: the
+/// What a [`TreeError::TooMuchInOneTick`] adds when the node it names is not the root: the
 /// worst case of the whole tree, which is what the limit applies to.
 fn whole_tree(worst: u64, tree_worst: u64) -> String {
     if tree_worst == worst {
@@ -730,22 +769,23 @@ fn widest_learning_selector(spec: &NodeSpec) -> Option<&NodeSpec> {
     spec.children.iter().find_map(widest_learning_selector)
 }
 
-/// Upper bound of the commands one tick can issue: each action issues at most one; loops
-/// multiply their child's bound. Also the node to blame if the bound is past `limit`, with
-/// its own bound: the deepest node past it (followed down the first
-/// child past it), since the root's line says nothing when a `REPEAT` deep inside is the
-/// cause; `None` if the tree is within the limit.
-fn worst_case_commands(spec: &NodeSpec, limit: u64) -> (u64, Option<(&NodeSpec, u64)>) {
+/// Upper bound of what one tick can count (commands or leaves): a leaf is ticked at most
+/// once per pass, a composite ticks each child at most once, and loops multiply their
+/// child's bound. Also the node to blame if the bound is past `limit`, with its own bound:
+/// the deepest node past it (followed down the first child past it), since the root's line
+/// says nothing when a `REPEAT` deep inside is the cause; `None` if the tree is within the
+/// limit.
+fn worst_case(spec: &NodeSpec, counted: PerTick, limit: u64) -> (u64, Option<(&NodeSpec, u64)>) {
     let mut children: u64 = 0;
     let mut culprit = None;
     for child in &spec.children {
-        let (worst, deeper) = worst_case_commands(child, limit);
+        let (worst, deeper) = worst_case(child, counted, limit);
         children = children.saturating_add(worst);
         culprit = culprit.or(deeper);
     }
     let worst = match &spec.kind {
         NodeKind::Action { .. } => 1,
-        NodeKind::Condition { .. } => 0,
+        NodeKind::Condition { .. } => u64::from(counted == PerTick::Leaves),
         NodeKind::Repeat { times } => children.saturating_mul(u64::from(*times)),
         NodeKind::Retry { attempts } => children.saturating_mul(u64::from(*attempts)),
         _ => children,
@@ -761,12 +801,13 @@ mod tests {
     use super::*;
     use crate::bt::parse::parse_tree;
     use crate::uav::UavCatalog;
+    use rand::SeedableRng;
 
     /// The line and message of the command-limit error for tree `text`.
     fn refusal(text: &str) -> (usize, String) {
         let spec = parse_tree("t.bt", text, &UavCatalog).expect("a valid tree");
         match Tree::check(&spec) {
-            Err(error @ TreeError::TooManyCommands { line, .. }) => (line, error.to_string()),
+            Err(error @ TreeError::TooMuchInOneTick { line, .. }) => (line, error.to_string()),
             other => panic!("expected the command limit, got {other:?}"),
         }
     }
@@ -801,5 +842,36 @@ mod tests {
         let spec =
             parse_tree("t.bt", "REPEAT 1 n=16\n- A-rotate 0\n", &UavCatalog).expect("a tree");
         assert_eq!(Tree::check(&spec), Ok(()));
+    }
+
+    /// Conditions issue no command, so loops over them alone are bounded by the leaves a
+    /// tick may tick. Before, this tree passed and a tick out of the target's view ticked
+    /// `C-seeTarget` a million times (a billion with one more level).
+    #[test]
+    fn loops_over_conditions_alone_are_bounded_by_the_leaves_a_tick_may_tick() {
+        let (line, message) = refusal("RETRY 1 n=1000\n- RETRY 1 n=1000\n-- C-seeTarget 0\n");
+        assert_eq!(line, 1);
+        assert_eq!(
+            message,
+            "t.bt:1: this RETRY n=1000 may tick up to 1000000 leaves in one tick; the limit is 1024"
+        );
+        let within = parse_tree("t.bt", "RETRY 1 n=1000\n- C-seeTarget 0\n", &UavCatalog);
+        assert_eq!(Tree::check(&within.expect("a tree")), Ok(()));
+    }
+
+    /// A replay lists every leaf it ticks, so its limit counts conditions as well as
+    /// actions: here a million commands, within the limit, but two million leaves.
+    #[test]
+    fn a_replay_counts_conditions_and_actions_against_its_leaf_limit() {
+        let text =
+            "REPEAT 1 n=1000\n- REPEAT 1 n=1000\n-- AND 2\n--- C-seeTarget 0\n--- A-rotate 0\n";
+        let spec = parse_tree("t.bt", text, &UavCatalog).expect("a tree");
+        let rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        let error = Tree::for_replay(&spec, LearnParams::greedy(), rng).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "t.bt:1: this REPEAT n=1000 may tick up to 2000000 leaves in one tick; the limit is \
+             1000000"
+        );
     }
 }
