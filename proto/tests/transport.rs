@@ -282,6 +282,27 @@ fn a_wait_that_times_out_says_what_it_waited_for() {
     assert!(text.contains("round 42") && text.contains("wake/agents"), "{text}");
 }
 
+/// A block shorter than a microsecond ends: iceoryx2 hands the socket whole microseconds,
+/// and a timeout of 0 there means none. Before, a wait whose deadline was under a
+/// microsecond away blocked until a wake-up came, which a silent peer never sends. The
+/// sleep runs on a thread of its own so that the test can say so instead of hanging.
+#[test]
+fn a_sleep_shorter_than_a_microsecond_ends() {
+    let config = run("sub-microsecond");
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let (done, ended) = std::sync::mpsc::channel();
+    let agent_config = config.clone();
+    std::thread::spawn(move || {
+        let agent = RunServices::open(&agent_config).unwrap().into_agent().unwrap();
+        let slept = agent.waiter().sleep(Duration::from_nanos(500));
+        done.send(slept.map_err(|e| e.to_string())).expect("the test waits for the result");
+    });
+    match ended.recv_timeout(BOUND) {
+        Ok(slept) => slept.expect("a sleep of 500 ns"),
+        Err(_) => panic!("a sleep of 500 ns had not ended after {BOUND:?}"),
+    }
+}
+
 #[test]
 fn nothing_of_a_run_is_left_after_every_process_dropped_its_ports() {
     let config = run("clean");

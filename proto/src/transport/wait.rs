@@ -10,6 +10,12 @@ use std::cell::Cell;
 use std::fmt::Display;
 use std::time::{Duration, Instant};
 
+/// The shortest block on the listener. iceoryx2 hands the socket its timeout in whole
+/// microseconds, and a timeout of 0 there means none: a block of less than a microsecond,
+/// such as a wait's last one before its deadline, would last until a wake-up came, which a
+/// silent peer never sends.
+const SHORTEST_BLOCK: Duration = Duration::from_micros(1);
+
 /// The phases of a wait, tuned on a 2-core machine by `benches/barrier.rs`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WaitPolicy {
@@ -239,9 +245,10 @@ impl Waiter {
 
     /// Blocks until a wake-up arrives or `timeout` passes, polling nothing: for a reader that
     /// drains on its own schedule (the supervisor) instead of answering at once. A wake-up
-    /// sent while it was not blocked ends the next call at once.
+    /// sent while it was not blocked ends the next call at once. A timeout under a
+    /// microsecond blocks for one (`SHORTEST_BLOCK`).
     pub fn sleep(&self, timeout: Duration) -> Result<(), TransportError> {
-        match self.listener.timed_wait(|_| {}, timeout) {
+        match self.listener.timed_wait(|_| {}, timeout.max(SHORTEST_BLOCK)) {
             // A signal cut the block short: the caller re-checks what it waits for.
             Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
             Err(e) => Err(TransportError::Port {
