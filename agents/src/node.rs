@@ -425,9 +425,7 @@ fn fly<'a>(
 fn open_ports(run: &RunConfig, world_timeout: Duration, attaching: bool) -> Result<AgentPorts> {
     let run = RunConfig { open_timeout: world_timeout, ..run.clone() };
     match RunServices::open(&run).and_then(RunServices::into_agent) {
-        Err(TransportError::ServiceMissing { waited, .. })
-            if attaching && !termination_requested() =>
-        {
+        Err(TransportError::ServiceMissing { waited, .. }) if attaching => {
             bail!(
                 "run `{}`: not running: no world created its services within {waited:?} \
                  (--world-timeout-ms)",

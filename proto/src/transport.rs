@@ -151,6 +151,11 @@ impl RunConfig {
             wait: WaitPolicy::default(),
         }
     }
+
+    /// The error of a wait or an open of this run that a termination signal cut short.
+    pub(crate) fn terminated(&self, what: &str) -> TransportError {
+        TransportError::Terminated { run: self.run_id.clone(), what: what.to_string() }
+    }
 }
 
 /// The iceoryx2 configuration of a run: defaults (no config file is read, so a user's or the

@@ -367,6 +367,14 @@ fn child_process() {
         }
         return;
     }
+    if role == "supervised-opener" {
+        // Its first node installs the SIGTERM latch; then it opens a run no world serves.
+        let _agent = RunServices::open(&config).unwrap().into_agent().unwrap();
+        println!("child-ready");
+        let opened = RunServices::open(&unserved(&config)).map(|_| ());
+        println!("child-result {opened:?}");
+        return;
+    }
     let agent = RunServices::open(&config).unwrap().into_agent().unwrap();
     println!("child-ready");
     if role == "supervised-agent" {
@@ -607,12 +615,25 @@ fn spawn_and_kill(config: &RunConfig, role: &str) {
 fn sigterm_makes_a_supervised_agent_leave_its_wait_cleanly() {
     let config = run("sigterm");
     let world = RunServices::create(&config).unwrap().into_world().unwrap();
-    let (mut child, lines, mut seen) = spawn_child(&config, "supervised-agent");
+    let (mut child, lines, seen) = spawn_child(&config, "supervised-agent");
     // Give it time to block in its wait; SIGTERM must cut the block short either way.
     std::thread::sleep(Duration::from_millis(50));
+    let seen = terminate(&mut child, lines, seen);
+    // It dropped its ports itself: nothing to clean.
+    assert_eq!(world.peers().observation_subscribers, 0, "stdout:\n{seen}");
+    assert_eq!(world.services().cleanup_dead_nodes(), 0);
+}
+
+/// SIGTERMs a child of [`spawn_child`] and checks that it left its wait or open with
+/// `Terminated` and exited cleanly; returns all it printed (`seen` so far, then `lines`).
+fn terminate(
+    child: &mut Child,
+    lines: std::io::Lines<std::io::BufReader<std::process::ChildStdout>>,
+    mut seen: String,
+) -> String {
     // SAFETY: signalling our own child by pid.
     assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) }, 0);
-    // Bounded: the child's wait ends on SIGTERM at the latest after one slice, or it exits.
+    // Bounded: the wait or the open ends on SIGTERM at its next look, or at its time-out.
     for line in lines {
         seen.push_str(&line.unwrap());
         seen.push('\n');
@@ -620,9 +641,25 @@ fn sigterm_makes_a_supervised_agent_leave_its_wait_cleanly() {
     let status = child.wait().unwrap();
     assert!(status.success(), "child {status}; stdout:\n{seen}");
     assert!(seen.contains("child-result Err(Terminated"), "stdout:\n{seen}");
-    // It dropped its ports itself: nothing to clean.
-    assert_eq!(world.peers().observation_subscribers, 0, "stdout:\n{seen}");
-    assert_eq!(world.services().cleanup_dead_nodes(), 0);
+    seen
+}
+
+/// A run no world serves, beside `config`'s.
+fn unserved(config: &RunConfig) -> RunConfig {
+    RunConfig { run_id: format!("{}-unserved", config.run_id), ..config.clone() }
+}
+
+/// A SIGTERM while an agent opens a run that no world serves (yet) ends the open with
+/// `Terminated`. Before, it said `ServiceMissing`, "no world created ... within" the open's
+/// whole time-out, a few milliseconds after the signal.
+#[test]
+fn sigterm_while_opening_a_run_says_terminated() {
+    let config = run("sigterm-open");
+    let _world = RunServices::create(&config).unwrap().into_world().unwrap();
+    let (mut child, lines, seen) = spawn_child(&config, "supervised-opener");
+    terminate(&mut child, lines, seen);
+    let after = leftover_files(&unserved(&config).run_id).unwrap();
+    assert!(after.is_empty(), "left behind by the open: {after:#?}");
 }
 
 /// The signals a child in `role` catches and ignores once it made every port of a run and

@@ -140,8 +140,11 @@ impl RunServices {
     ) -> Result<(), TransportError> {
         let start = Instant::now();
         while self.episodes.dynamic_config().number_of_publishers() == 0 {
+            if termination_requested() {
+                return Err(self.run.terminated("the world's episode publisher"));
+            }
             let waited = start.elapsed();
-            if waited >= self.run.open_timeout || termination_requested() {
+            if waited >= self.run.open_timeout {
                 return Err(TransportError::PublisherMissing {
                     run: self.run.run_id.clone(),
                     service: EPISODES.into(),
@@ -321,6 +324,10 @@ impl WorldPorts {
         sample.reports[..count].copy_from_slice(&self.batch.reports[..count]);
         match sample.send() {
             Ok(_) => {}
+            // The backpressure handler gave up: on SIGTERM, or at `report_timeout`.
+            Err(SendError::UnableToDeliver) if termination_requested() => {
+                return Err(self.services.run.terminated("the supervisor to drain its records"))
+            }
             Err(SendError::UnableToDeliver) => {
                 return Err(TransportError::ReportsStalled {
                     run: self.services.run.run_id.clone(),
@@ -414,8 +421,11 @@ impl WorldPorts {
             if missing.is_empty() {
                 return Ok(());
             }
+            if termination_requested() {
+                return Err(self.services.run.terminated("the run's peers"));
+            }
             let waited = start.elapsed();
-            if waited >= timeout || termination_requested() {
+            if waited >= timeout {
                 return Err(TransportError::PeersMissing {
                     run: self.services.run.run_id.clone(),
                     missing: missing.join(", "),

@@ -418,7 +418,10 @@ fn retry<T, E: Into<ServiceFailure>>(
         if !failure.retried {
             return Err(failure.into_error(run, name));
         }
-        if Instant::now() >= deadline || termination_requested() {
+        if termination_requested() {
+            return Err(run.terminated(&format!("service `{name}` to open")));
+        }
+        if Instant::now() >= deadline {
             return Err(TransportError::ServiceMissing {
                 run: run.run_id.clone(),
                 service: name.to_string(),
