@@ -211,8 +211,9 @@ pub const WORLD_NODE_NAME: &str = "world";
 
 impl RunNode {
     /// Creates the node, named `name` (see [`WORLD_NODE_NAME`]), after installing the signal
-    /// handling `run` asks for. Creating it also removes the resources of dead nodes of the
-    /// same run.
+    /// handling `run` asks for. Creating it does not remove the resources of dead nodes of
+    /// the run ([`iceoryx_config`] turns that off): [`cleanup_run`] and
+    /// [`RunServices::cleanup_dead_nodes`] do.
     pub fn new(run: &RunConfig, name: Option<&str>) -> Result<RunNode, TransportError> {
         let config = iceoryx_config(&run.run_id)?;
         if run.signals != SignalMode::Untouched {

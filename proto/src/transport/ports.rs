@@ -22,8 +22,10 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
-/// The world wakes the supervisor once per this many episode records (a quarter of what
-/// the supervisor's buffer holds, so it wakes well before the buffer fills).
+/// The world wakes the supervisor once per this many episode records, a quarter of the
+/// records the supervisor's buffer holds when its batches are full. Batches sent every
+/// millisecond are often far from full, so what keeps the buffer from filling is the
+/// supervisor's own drain every 10 ms (docs/TRANSPORT.md).
 pub const EPISODE_WAKE_EVERY: u64 = (super::EPISODE_BUFFER / 4) as u64;
 
 /// An observation as the agent reads it: straight from shared memory, no copy.
