@@ -4,6 +4,7 @@
 use crate::results::Flown;
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
+use std::io::{BufRead as _, Read as _};
 use std::path::Path;
 
 /// One agent's curve.
@@ -98,21 +99,29 @@ pub fn write_greedy_csv(path: &Path, greedy: &[Vec<(u64, f64, u64)>]) -> Result<
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Longest line a `curve.csv` may have; `write_csv` writes rows of under 60 bytes. A curve
+/// is read a line at a time, so its length has no bound (one of 64 UAVs and 50 000 episodes
+/// takes 80 MB), while a file without line ends, such as a mistaken `/dev/zero`, is
+/// refused at its first line.
+const MAX_CURVE_LINE: u64 = 256;
+
 /// Reads agent `agent`'s smoothed curve back from a `curve.csv`: (episode, smoothed length)
 /// points. Every field of every row is checked, also those not drawn: a file that is not
 /// what `write_csv` writes is refused at its first bad field, named with file and line.
 pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<(u64, f64)>> {
-    let text = flockstep_world::map::read_input(path)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    let header = text.lines().next().unwrap_or_default();
+    let file =
+        std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut lines =
+        Lines { reader: std::io::BufReader::new(file), path, number: 0, line: String::new() };
+    let header = lines.next_line()?.map_or("", |(_, header)| header);
     anyhow::ensure!(
-        header.trim_end() == CURVE_HEADER,
+        header == CURVE_HEADER,
         "{}:1: not a curve.csv: expected the header `{CURVE_HEADER}`, found `{header}`",
         path.display()
     );
     let mut points = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let row = Row { path, line: i + 1, fields: line.trim_end().split(',').collect() };
+    while let Some((number, line)) = lines.next_line()? {
+        let row = Row { path, line: number, fields: line.split(',').collect() };
         anyhow::ensure!(
             row.fields.len() == 4,
             "{}:{}: {} fields, expected 4: {CURVE_HEADER}",
@@ -130,6 +139,33 @@ pub fn read_smoothed(path: &Path, agent: usize) -> Result<Vec<(u64, f64)>> {
     }
     anyhow::ensure!(!points.is_empty(), "{}: no rows for agent {agent}", path.display());
     Ok(points)
+}
+
+/// The lines of a `curve.csv` being read, each at most [`MAX_CURVE_LINE`] bytes.
+struct Lines<'a> {
+    reader: std::io::BufReader<std::fs::File>,
+    path: &'a Path,
+    /// The number of the line last read, from 1.
+    number: usize,
+    line: String,
+}
+
+impl Lines<'_> {
+    /// The next line's number and text without its line end; `None` at the end of the file.
+    fn next_line(&mut self) -> Result<Option<(usize, &str)>> {
+        self.line.clear();
+        self.number += 1;
+        let (path, number) = (self.path.display(), self.number);
+        let read = (&mut self.reader)
+            .take(MAX_CURVE_LINE + 1)
+            .read_line(&mut self.line)
+            .with_context(|| format!("cannot read {path}:{number}"))?;
+        anyhow::ensure!(
+            read as u64 <= MAX_CURVE_LINE || self.line.ends_with('\n'),
+            "{path}:{number}: a line longer than {MAX_CURVE_LINE} bytes, not a curve.csv"
+        );
+        Ok((read > 0).then(|| (self.number, self.line.trim_end())))
+    }
 }
 
 /// One data row of a `curve.csv` being read, for errors that name its place and field.
@@ -221,6 +257,27 @@ mod tests {
         }
         let e = refused(&format!("{CURVE_HEADER}\n0,2,4,4\n"));
         assert!(e.ends_with("curve.csv: no rows for agent 1"), "{e}");
+        let e = refused(&format!("{CURVE_HEADER}\n0,1,4,4\n{}", "9".repeat(1000)));
+        assert!(e.ends_with("curve.csv:3: a line longer than 256 bytes, not a curve.csv"), "{e}");
+        let e = refused("");
+        assert!(e.ends_with("curve.csv:1: not a curve.csv: expected the header `episode,agent,mean_length,smoothed_length`, found ``"), "{e}");
+    }
+
+    /// A curve is read a line at a time, whatever its length. Before, it was read whole up
+    /// to the 16 MiB bound of input files, and `reproduce` refused the curve of its own run
+    /// past about 680 000 rows, after the run.
+    #[test]
+    fn a_curve_larger_than_the_input_file_bound_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("curve.csv");
+        let lengths: Vec<u32> = (0..400_000).map(|e| 100 - (e % 90)).collect();
+        let trial = || vec![flown(&[(0, lengths.as_slice())])];
+        write_csv(&path, &curves(&[trial(), trial()], 1)).unwrap();
+        let size = std::fs::metadata(&path).unwrap().len();
+        assert!(size > flockstep_world::map::MAX_INPUT_BYTES, "only {size} bytes");
+        let points = read_smoothed(&path, 2).unwrap();
+        assert_eq!(points.len(), lengths.len());
+        assert_eq!(points.last(), Some(&(399_999, 61.0)));
     }
 
     #[test]

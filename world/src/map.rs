@@ -80,8 +80,8 @@ impl PartialEq for MapFile {
     }
 }
 
-/// The largest text file a user gives that flockstep reads: maps, trees, replay scripts,
-/// the `curve.csv` of `plot`, the `summary.json` of `eval`. 16 MiB is far past any real one
+/// The largest text file a user gives that flockstep reads whole: maps, trees, replay
+/// scripts, the `summary.json` of `eval`. 16 MiB is far past any real one
 /// (a generated 64-UAV map is under 100 KiB), and a mistaken `--scenario /dev/zero` is then
 /// an error naming the file, not a read that runs until memory does.
 pub const MAX_INPUT_BYTES: u64 = 16 << 20;
