@@ -3,7 +3,7 @@
 //! with SIGINT ignored from before they run, with their stderr in a log file, and shut down
 //! by a ladder: wait, SIGTERM, SIGKILL.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use std::fs::File;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -222,19 +222,29 @@ pub fn bring_all_down(processes: &mut [&mut Process]) -> Result<bool> {
 }
 
 /// The shutdown ladder: let them leave for `grace`, then bring down those still running
-/// ([`bring_all_down`]). Returns the names of those that had to be signalled.
+/// ([`bring_all_down`]). Returns the names of those that had to be signalled; an error
+/// names those still running after it.
 pub fn shut_down(processes: &mut [&mut Process], grace: Duration) -> Result<Vec<String>> {
     if until_exited(processes, grace, |_| {})? {
         return Ok(Vec::new());
     }
-    let mut forced = Vec::new();
+    let forced = still_running(processes)?;
+    if !bring_all_down(processes)? {
+        let left = still_running(processes)?.join(", ");
+        bail!("{left} still running {} s after SIGKILL", KILL_WAIT.as_secs());
+    }
+    Ok(forced)
+}
+
+/// The names of the processes that have not exited.
+fn still_running(processes: &mut [&mut Process]) -> Result<Vec<String>> {
+    let mut running = Vec::new();
     for p in processes.iter_mut() {
         if p.status()?.is_none() {
-            forced.push(p.name.clone());
+            running.push(p.name.clone());
         }
     }
-    bring_all_down(processes)?;
-    Ok(forced)
+    Ok(running)
 }
 
 #[cfg(test)]

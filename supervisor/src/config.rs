@@ -394,6 +394,9 @@ fn check_out_dir(out: &Path, overwrite: bool, resume: Option<(&Path, &str)>) -> 
         }
     }
     let Some(found) = crate::results::earlier_results(out) else { return Ok(()) };
+    // A run still writing there is what to say, not its results so far, which --overwrite
+    // would not be let to replace: the run takes the lock for good later.
+    crate::out_lock::OutDirLock::take(out)?;
     // Not `--out DIR`: `reproduce` and `eval` choose the directory when no --out is given.
     if !overwrite {
         bail!(

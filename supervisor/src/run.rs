@@ -164,7 +164,9 @@ fn copy_resumed_snapshots(config: &RunConfig, resume: &Path) -> Result<()> {
 const PLOTTED_AGENTS: usize = 8;
 
 /// Writes the curves, the plot and `summary.json`; `error` is what failed the run, if
-/// anything did (a note of the summary).
+/// anything did (a note of the summary). Each file is written even if one before it could
+/// not be (the first such error is returned): `summary.json` alone keeps the run's timings
+/// and notes.
 fn write_results(
     config: &RunConfig,
     recorder: &Recorder,
@@ -175,9 +177,9 @@ fn write_results(
     let collector = recorder.collector();
     let window = curve::window(config.smoothing, collector.trained_episodes());
     let curves = curve::curves(collector.train_lengths(), window);
-    curve::write_csv(&config.out.join("curve.csv"), &curves)?;
+    let curves_written = curve::write_csv(&config.out.join("curve.csv"), &curves);
     let greedy: Vec<_> = (0..collector.agents()).map(|a| collector.greedy_curve(a)).collect();
-    curve::write_greedy_csv(&config.out.join("greedy_curve.csv"), &greedy)?;
+    let greedy_written = curve::write_greedy_csv(&config.out.join("greedy_curve.csv"), &greedy);
     let mut series: Vec<Series> = curves
         .iter()
         .take(PLOTTED_AGENTS)
@@ -226,9 +228,10 @@ fn write_results(
         config.comm.name(),
         config.episodes.train_episodes
     );
-    plot_curves(&config.out.join("curve.svg"), &title, &series, &references)?;
+    let plotted = plot_curves(&config.out.join("curve.svg"), &title, &series, &references);
     let value = summary::summary(config, recorder, wall, outcome, error);
-    summary::write(&config.out.join("summary.json"), &value)
+    let summarized = summary::write(&config.out.join("summary.json"), &value);
+    [curves_written, greedy_written, plotted, summarized].into_iter().collect()
 }
 
 #[cfg(test)]

@@ -73,9 +73,16 @@ pub fn run(config: &RunConfig, recorder: &mut Recorder, stop: &Interrupts) -> Re
     // A failed run brings its children down at once; a finished one lets them leave.
     let grace = if result.is_ok() { GRACE } else { Duration::ZERO };
     let mut processes: Vec<&mut Process> = fleet.processes().collect();
-    let forced = shut_down(&mut processes, grace)?;
-    cleanup_run(&config.run_id).context("removing the run's shared-memory resources")?;
+    let forced = shut_down(&mut processes, grace);
+    // Also when a child could not be brought down: its files go at the next start-up sweep.
+    let cleaned = cleanup_run(&config.run_id).context("removing the run's shared-memory resources");
+    if let (Err(_), Err(unstopped)) = (&result, &forced) {
+        // The run's own failure is the error; a child left running is worth a note.
+        recorder.note(format!("{unstopped:#}"));
+    }
     let mut outcome = result?;
+    let forced = forced?;
+    cleaned?;
     outcome.peak_rss_kib =
         processes.iter().filter_map(|p| Some((p.name.clone(), p.peak_rss_kib?))).collect();
     if !forced.is_empty() {
@@ -662,12 +669,20 @@ fn open_ports(config: &RunConfig, world: &mut Process) -> Result<SupervisorPorts
             Ok(ports) => return Ok(ports),
             Err(
                 TransportError::ServiceMissing { .. } | TransportError::PublisherMissing { .. },
-            ) if Instant::now() < deadline => {}
+            ) => {}
             Err(e) => return Err(e.into()),
         }
         if let Some(status) = world.status()? {
             bail!(
                 "the world process exited ({status}) before the run started: {}",
+                world.last_words()
+            );
+        }
+        // The open's own error would name its own 100 ms.
+        if Instant::now() >= deadline {
+            bail!(
+                "the world process had not created the run's services {} s after it started: {}",
+                WORLD_START.as_secs(),
                 world.last_words()
             );
         }

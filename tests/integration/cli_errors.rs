@@ -114,6 +114,34 @@ fn results_directory_that_cannot_be_written() {
     });
 }
 
+/// A results file that cannot be written fails the run, and the files after it are written
+/// all the same: before, a `curve.csv` that could not be written left no `curve.svg` and no
+/// `summary.json`, the one file with the run's timings and notes.
+#[test]
+fn the_summary_is_written_when_a_file_before_it_cannot_be() {
+    for transport in ["inproc", "shm"] {
+        let dir = scratch();
+        std::fs::create_dir(dir.path().join("curve.csv"))
+            .expect("a directory in curve.csv's place");
+        let out = dir.path().display().to_string();
+        let id = run_id("curve-unwritable");
+        let args = words("--scenario s3 --uavs 2 --episodes 20 --trials 1 --quiet");
+        let line = error_line(
+            &[&args[..], &["--transport", transport, "--out", &out, "--run-id", &id]].concat(),
+        );
+        let expected = format!(
+            "supervisor: error: cannot write {out}/curve.csv: Is a directory (os error 21)"
+        );
+        assert_eq!(line, expected, "{transport}");
+        let summary = summary(dir.path());
+        assert_eq!(summary["complete"], true, "{transport}: {summary:#}");
+        for written in ["greedy_curve.csv", "curve.svg", "episodes.csv"] {
+            assert!(dir.path().join(written).is_file(), "{transport}: no {written}");
+        }
+        assert_nothing_left(&id);
+    }
+}
+
 /// A repeated command must not silently replace a finished run: `--out` holding one is
 /// refused unless `--overwrite`, which removes exactly what a run writes (a run's own
 /// listing is checked against that list) and never the snapshots `--resume` starts from.
@@ -191,11 +219,13 @@ fn the_results_directory_of_a_live_run_is_refused() {
     let live = Spawned::start(SUPERVISOR, &[&args[..], &rest[..]].concat());
     let episodes = dir.path().join("episodes.csv");
     crate::harness::wait_for_records(&episodes, 10_000, Duration::from_secs(60));
-    for transport in ["shm", "inproc"] {
-        let second = ["--transport", transport, "--out", &out, "--overwrite", "--episodes", "10"];
+    // Without --overwrite the second run was told to give it, as if the results were old.
+    for (transport, overwrite) in [("shm", "--overwrite"), ("inproc", "--overwrite"), ("shm", "")] {
+        let second = ["--transport", transport, "--out", &out, overwrite, "--episodes", "10"];
+        let second: Vec<&str> = second.into_iter().filter(|arg| !arg.is_empty()).collect();
         let line = error_line(&[&second[..], &["--scenario", "s3", "--uavs", "2"]].concat());
         let expected = format!("--out {out}: another run is writing its results there");
-        assert!(line.contains(&expected), "{transport}: {line}");
+        assert!(line.contains(&expected), "{transport} {overwrite}: {line}");
     }
     assert!(std::fs::metadata(&episodes).is_ok_and(|m| m.len() > 10_000), "removed");
     live.interrupt();
