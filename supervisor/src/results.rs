@@ -70,9 +70,6 @@ pub struct GreedyStats {
     /// Greedy episodes over every trial.
     pub episodes: u64,
     pub truncated: u64,
-    /// Mean length per trial, by trial: None for a trial the agent has no greedy episode of
-    /// (one the run was stopped in before its evaluation).
-    pub per_trial: Vec<Option<f64>>,
     /// The mean over trials ([`OverTrials`]).
     mean: f64,
 }
@@ -263,6 +260,8 @@ pub struct Collector {
     train_truncated: Vec<u64>,
     /// Final greedy totals per agent and trial.
     greedy: Vec<Vec<Totals>>,
+    /// Greedy episodes per agent and trial, periodic and final.
+    greedy_flown: Vec<Vec<u64>>,
     plan: EvalPlan,
     /// Periodic greedy evaluations per agent and block, over the trials whose block is
     /// closed. A trial's blocks come in order, so only its latest is open, in `open_block`.
@@ -286,6 +285,7 @@ impl Collector {
             train: Vec::new(),
             train_truncated: Vec::new(),
             greedy: Vec::new(),
+            greedy_flown: Vec::new(),
             plan,
             periodic: Vec::new(),
             open_block: Vec::new(),
@@ -353,6 +353,7 @@ impl Collector {
                     self.train_truncated[slot] += truncated;
                 }
                 Phase::Eval => {
+                    self.greedy_flown[slot][trial] += 1;
                     let entry = match self.plan.block_of(report.episode) {
                         Some(block) => {
                             let (open, totals) = &mut self.open_block[slot][trial];
@@ -379,6 +380,7 @@ impl Collector {
         self.train.resize(agents, vec![Flown::default(); trials]);
         self.train_truncated.resize(agents, 0);
         self.greedy.resize(agents, vec![(0, 0, 0); trials]);
+        self.greedy_flown.resize(agents, vec![0; trials]);
         self.periodic.resize(agents, vec![OverTrials::default(); self.plan.blocks as usize]);
         self.open_block.resize(agents, vec![(0, (0, 0, 0)); trials]);
     }
@@ -392,6 +394,16 @@ impl Collector {
     /// one.
     pub fn trained_episodes(&self) -> u64 {
         self.train.iter().flatten().map(|flown| flown.span().end).max().unwrap_or(0)
+    }
+
+    /// Where the run's greedy episodes belong.
+    pub fn plan(&self) -> EvalPlan {
+        self.plan
+    }
+
+    /// How many greedy episodes `agent` flew in `trial`: periodic and final.
+    pub fn greedy_flown(&self, agent: usize, trial: usize) -> u64 {
+        self.greedy_flown.get(agent).and_then(|trials| trials.get(trial)).copied().unwrap_or(0)
     }
 
     /// `train[agent][trial]`: the training lengths of each agent in each trial.
@@ -449,9 +461,16 @@ impl Collector {
         Some(GreedyStats {
             episodes: trials.iter().map(|t| t.0).sum(),
             truncated: over.truncated,
-            per_trial: trials.iter().copied().map(trial_mean).collect(),
             mean: over.mean()?,
         })
+    }
+
+    /// `agent`'s mean greedy length after training in each trial, by trial: None for a trial
+    /// it has no greedy episode of (one the run was stopped in before its evaluation), also
+    /// when no trial has any.
+    pub fn greedy_per_trial(&self, agent: usize) -> Vec<Option<f64>> {
+        let trials = self.greedy.get(agent).map_or(&[][..], Vec::as_slice);
+        trials.iter().copied().map(trial_mean).collect()
     }
 
     /// Barrier rounds: every round advances each trial that is not done by one tick, and
@@ -575,10 +594,21 @@ mod tests {
         }
         let greedy = collector.greedy(0).expect("greedy episodes in trials 2 and 3");
         assert_eq!(
-            serde_json::json!(greedy.per_trial),
+            serde_json::json!(collector.greedy_per_trial(0)),
             serde_json::json!([null, null, 20.0, 30.0])
         );
         assert_eq!((greedy.mean(), greedy.episodes), (25.0, 2));
+    }
+
+    /// A run stopped before any trial's evaluation has a null for each trial, as one stopped
+    /// before some trials' evaluation: the agent's entry was null, not one per trial.
+    #[test]
+    fn greedy_lengths_per_trial_are_one_per_trial_without_any_greedy_episode() {
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        collector.record(&report(0, Phase::Train, 0)).unwrap();
+        assert_eq!(collector.greedy(0), None);
+        assert_eq!(collector.greedy_per_trial(0), vec![None, None]);
     }
 
     /// A greedy report of `trial`'s evaluation episode `episode`: UAV2 flies it, UAV1 only
@@ -628,7 +658,10 @@ mod tests {
         assert_eq!(collector.greedy_curve(0), vec![(1, 25.0, 0), (2, 40.0, 1)]);
         let greedy = collector.greedy(0).expect("the final evaluation");
         assert_eq!(greedy.mean(), 40.0);
-        assert_eq!(serde_json::json!(greedy.per_trial), serde_json::json!([30.0, 50.0]));
+        assert_eq!(collector.greedy_per_trial(0), vec![Some(30.0), Some(50.0)]);
+        // Periodic and final episodes: UAV1 was down in three of trial 1's.
+        assert_eq!((collector.greedy_flown(0, 0), collector.greedy_flown(0, 1)), (6, 3));
+        assert_eq!((collector.greedy_flown(1, 0), collector.greedy_flown(1, 1)), (6, 6));
         assert_eq!(collector.greedy_curve(1), vec![(1, 7.0, 0), (2, 7.0, 0)]);
     }
 

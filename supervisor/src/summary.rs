@@ -7,7 +7,7 @@ use crate::cli::Transport;
 use crate::config::RunConfig;
 use crate::curve;
 use crate::recorder::Recorder;
-use crate::results::{Flown, GreedyStats};
+use crate::results::Flown;
 use crate::run::Outcome;
 use anyhow::{Context, Result};
 use clap::ValueEnum;
@@ -55,7 +55,7 @@ pub fn summary(
         "transport": format!("{:?}", config.transport).to_lowercase(),
         "complete": outcome.complete,
         "every_agent_flew_every_episode":
-            every_agent_flew_every_episode(config, recorder, &greedy, outcome.complete),
+            every_agent_flew_every_episode(config, recorder, outcome.complete),
         "notes": notes,
         "peak_rss_kib": outcome.peak_rss_kib.iter().map(|(name, kib)| json!({ "process": name, "kib": kib })).collect::<Vec<_>>(),
         "scenario": config.scenario_arg,
@@ -93,7 +93,7 @@ pub fn summary(
         "final_mean_episode_length_per_agent": final_means,
         "train_truncated": (0..agents).map(|a| collector.train_truncated(a)).collect::<Vec<_>>(),
         "greedy_episode_length": greedy.iter().map(|g| g.as_ref().map(|g| g.mean())).collect::<Vec<_>>(),
-        "greedy_episode_length_per_trial": greedy.iter().map(|g| g.as_ref().map(|g| g.per_trial.clone())).collect::<Vec<_>>(),
+        "greedy_episode_length_per_trial": (0..agents).map(|a| collector.greedy_per_trial(a)).collect::<Vec<_>>(),
         "greedy_episodes": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.episodes)).collect::<Vec<_>>(),
         "greedy_truncated": greedy.iter().map(|g| g.as_ref().map_or(0, |g| g.truncated)).collect::<Vec<_>>(),
         "optimum_memoryless": (0..agents).map(|a| optimum(&config.scenario, a).ok().map(|o| o.expected_ticks)).collect::<Vec<_>>(),
@@ -107,35 +107,38 @@ fn absolute(path: &Path) -> String {
     path.canonicalize().unwrap_or_else(|_| path.to_path_buf()).display().to_string()
 }
 
-/// Whether every agent the run started flew every training and greedy episode of every
-/// trial: of the run's plan if it is `complete`, else of those the run flew before it was
-/// stopped (as many as any agent it started flew). A run that lost an agent, for good or
-/// until its restart, may still have run to its end; its results are then those of fewer
-/// agents for a while, which this says without reading `notes`.
-fn every_agent_flew_every_episode(
-    config: &RunConfig,
-    recorder: &Recorder,
-    greedy: &[Option<GreedyStats>],
-    complete: bool,
-) -> bool {
-    let lengths = recorder.collector().train_lengths();
+/// Whether every agent the run started flew every training and greedy episode (periodic and
+/// final) of every trial: of the run's plan if it is `complete`, else of those the run flew
+/// before it was stopped. A run that lost an agent, for good or until its restart, may
+/// still have run to its end; its results are then those of fewer agents for a while, which
+/// this says without reading `notes`.
+fn every_agent_flew_every_episode(config: &RunConfig, recorder: &Recorder, complete: bool) -> bool {
+    let collector = recorder.collector();
+    let lengths = collector.train_lengths();
     let trained = |slot: usize, trial: usize| {
         lengths.get(slot).and_then(|trials| trials.get(trial)).map_or(0, |f| f.len() as u64)
     };
-    // The evaluation after training (the periodic blocks are on the greedy curve).
-    let evaluated =
-        |slot: usize| greedy.get(slot).and_then(Option::as_ref).map_or(0, |g| g.episodes);
-    let started = 0..config.uavs;
+    let evaluated = |slot: usize, trial: usize| collector.greedy_flown(slot, trial);
     let e = &config.episodes;
-    let (train_plan, eval_plan): (Vec<u64>, u64) = if complete {
-        (vec![e.train_episodes; config.trials], e.eval_episodes * config.trials as u64)
-    } else {
-        let most = |trial| started.clone().map(|slot| trained(slot, trial)).max().unwrap_or(0);
-        ((0..config.trials).map(most).collect(), started.clone().map(evaluated).max().unwrap_or(0))
-    };
-    started.clone().all(|slot| {
-        (0..config.trials).all(|trial| trained(slot, trial) == train_plan[trial])
-            && evaluated(slot) == eval_plan
+    let greedy_planned = collector.plan().greedy_episodes(e.eval_episodes).unwrap_or(u64::MAX);
+    let (uavs, trials) = (config.uavs, config.trials);
+    each_flew_its_due(trained, uavs, trials, complete.then_some(e.train_episodes))
+        && each_flew_its_due(evaluated, uavs, trials, complete.then_some(greedy_planned))
+}
+
+/// Whether each of the first `agents` agents flew, in each of `trials`, the episodes due
+/// there (`flown(agent, trial)` of them): `planned` of a run's plan, or without a plan (a run
+/// that did not complete) as many as any of those agents flew in that trial.
+fn each_flew_its_due(
+    flown: impl Fn(usize, usize) -> u64,
+    agents: usize,
+    trials: usize,
+    planned: Option<u64>,
+) -> bool {
+    (0..trials).all(|trial| {
+        let due =
+            planned.unwrap_or_else(|| (0..agents).map(|a| flown(a, trial)).max().unwrap_or(0));
+        (0..agents).all(|agent| flown(agent, trial) == due)
     })
 }
 
@@ -222,8 +225,30 @@ pub fn summary_file(dir: &Path) -> Result<Value> {
 
 #[cfg(test)]
 mod tests {
-    use super::closing_lines;
+    use super::{closing_lines, each_flew_its_due};
     use serde_json::{json, Value};
+
+    /// Episodes flown by agent and trial, as `each_flew_its_due` reads them.
+    fn flown(counts: &[[u64; 2]]) -> impl Fn(usize, usize) -> u64 + '_ {
+        move |agent, trial| counts[agent][trial]
+    }
+
+    /// A complete run is held to its plan; one stopped early to what the agents flew, in
+    /// each trial apart: an agent one episode short in one trial is enough to say no.
+    #[test]
+    fn every_agent_must_fly_the_planned_episodes_or_those_any_agent_flew() {
+        let even = [[5, 5], [5, 5]];
+        assert!(each_flew_its_due(flown(&even), 2, 2, Some(5)));
+        assert!(!each_flew_its_due(flown(&even), 2, 2, Some(6)));
+        assert!(each_flew_its_due(flown(&even), 2, 2, None));
+        let one_short = [[5, 5], [5, 4]];
+        assert!(!each_flew_its_due(flown(&one_short), 2, 2, None));
+        assert!(!each_flew_its_due(flown(&one_short), 2, 2, Some(5)));
+        let trials_apart = [[5, 3], [5, 3]];
+        assert!(each_flew_its_due(flown(&trials_apart), 2, 2, None));
+        // An agent the run did not start (the third here) is not held to anything.
+        assert!(each_flew_its_due(flown(&[[5, 5], [5, 5], [0, 0]]), 2, 2, Some(5)));
+    }
 
     #[test]
     fn the_recorded_iceoryx2_version_is_the_workspace_requirement() {

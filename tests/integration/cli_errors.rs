@@ -704,7 +704,7 @@ fn the_summary_records_the_whole_configuration() {
     );
     assert_eq!(inproc["eval_every"], 2);
     assert_eq!(inproc["eval_block"], 3);
-    // The periodic blocks are not the evaluation after training it counts.
+    // Every periodic and final greedy episode was flown.
     assert_eq!(inproc["every_agent_flew_every_episode"], true, "{inproc:#}");
     for key in ["restart", "snapshot_every", "agent_timeout_ms"] {
         assert!(inproc[key].is_null(), "{key} of an in-process run: {}", inproc[key]);
