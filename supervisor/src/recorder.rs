@@ -210,7 +210,7 @@ fn uav1_lengths(phase: Phase, collector: &Collector) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::results::EvalPlan;
+    use crate::results::scratch_collector;
 
     fn report(phase: Phase, episode: u64, length: u32, truncated: bool) -> EpisodeReport {
         let mut report = EpisodeReport { phase: phase as u8, episode, ..Default::default() };
@@ -220,18 +220,11 @@ mod tests {
         report
     }
 
-    /// A collector of one agent and two trials; the directory holds its CSV files.
-    fn two_trial_collector() -> (tempfile::TempDir, Collector) {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
-        (dir, collector)
-    }
-
     /// Before UAV1 has finished an episode its mean length is `-`, in training and in an
     /// evaluation alike.
     #[test]
     fn no_mean_length_is_shown_before_uav1_finished_an_episode() {
-        let (_dir, mut collector) = two_trial_collector();
+        let (_dir, mut collector) = scratch_collector(2);
         for phase in [Phase::Train, Phase::Eval] {
             assert_eq!(uav1_lengths(phase, &collector), "mean length -", "{phase:?}");
         }
@@ -242,7 +235,7 @@ mod tests {
     /// A recorder of one agent and two trials starting in `first`, redrawn once before any
     /// record: it says `starting`. The directory holds its CSV files.
     fn two_trial_recorder(total: u64, first: Phase) -> (tempfile::TempDir, Recorder) {
-        let (dir, collector) = two_trial_collector();
+        let (dir, collector) = scratch_collector(2);
         let mut recorder = Recorder::new(collector, total, first, true);
         recorder.redraw();
         assert_eq!(recorder.bar.prefix(), "starting");
@@ -281,7 +274,7 @@ mod tests {
     /// to 200 ms before.
     #[test]
     fn the_record_that_fills_the_bar_is_drawn_at_once() {
-        let (_dir, collector) = two_trial_collector();
+        let (_dir, collector) = scratch_collector(2);
         let (mut recorder, terminal) = Recorder::on_test_terminal(collector, 3, Phase::Eval);
         // Spends the burst.
         for _ in 0..100 {

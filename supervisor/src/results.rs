@@ -501,6 +501,15 @@ impl GreedyStats {
     }
 }
 
+/// A collector of one agent and `trials` trials for a test, and the scratch directory that
+/// holds its CSV files (removed when dropped).
+#[cfg(test)]
+pub(crate) fn scratch_collector(trials: usize) -> (tempfile::TempDir, Collector) {
+    let dir = tempfile::tempdir().expect("a scratch directory");
+    let collector = Collector::create(dir.path(), 1, trials, EvalPlan::default()).unwrap();
+    (dir, collector)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -514,8 +523,7 @@ mod tests {
 
     #[test]
     fn a_report_that_skips_an_episode_is_an_error_naming_both() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(2);
         for (trial, phase, episode) in
             [(0, Phase::Train, 0), (1, Phase::Train, 0), (0, Phase::Train, 1), (0, Phase::Eval, 0)]
         {
@@ -537,8 +545,7 @@ mod tests {
     /// naming the trial and the run's count, and nothing is recorded.
     #[test]
     fn a_report_of_an_unknown_trial_is_an_error_naming_the_count() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(2);
         let error = collector.record(&report(2, Phase::Train, 0)).unwrap_err().to_string();
         assert_eq!(error, "episode report for trial 2, but the run has 2 trials");
         assert_eq!(collector.ticks(), 0, "the bad report was not recorded");
@@ -566,8 +573,7 @@ mod tests {
     /// `window`, or fewer in every trial if one has fewer; trials with none are left out.
     #[test]
     fn the_final_mean_covers_the_same_last_episodes_of_every_trial_that_has_any() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 3, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(3);
         for (trial, lengths) in [(0, &[10, 20, 30][..]), (1, &[4, 6][..])] {
             for (episode, &length) in lengths.iter().enumerate() {
                 let mut r = report(trial, Phase::Train, episode as u64);
@@ -585,8 +591,7 @@ mod tests {
     /// stay at their own places (they used to move up into the empty ones).
     #[test]
     fn greedy_lengths_per_trial_keep_each_trials_place() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 4, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(4);
         for (trial, length) in [(2, 20), (3, 30)] {
             let mut r = report(trial, Phase::Eval, 0);
             r.lengths[0] = length;
@@ -604,8 +609,7 @@ mod tests {
     /// before some trials' evaluation: the agent's entry was null, not one per trial.
     #[test]
     fn greedy_lengths_per_trial_are_one_per_trial_without_any_greedy_episode() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 2, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(2);
         collector.record(&report(0, Phase::Train, 0)).unwrap();
         assert_eq!(collector.greedy(0), None);
         assert_eq!(collector.greedy_per_trial(0), vec![None, None]);
@@ -668,8 +672,7 @@ mod tests {
     /// Reports come from another process: numbers past `u64` are an error, not a panic.
     #[test]
     fn a_report_whose_end_is_past_the_largest_tick_is_an_error() {
-        let dir = tempfile::tempdir().expect("a scratch directory");
-        let mut collector = Collector::create(dir.path(), 1, 1, EvalPlan::default()).unwrap();
+        let (_dir, mut collector) = scratch_collector(1);
         let late = EpisodeReport { start_tick: u64::MAX - 12, ..report(0, Phase::Train, 0) };
         let error = collector.record(&late).unwrap_err().to_string();
         assert!(error.contains("start tick 18446744073709551603 plus length 13"), "{error}");
