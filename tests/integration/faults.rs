@@ -4,8 +4,9 @@
 
 use crate::harness::{
     agent_pids, assert_nothing_left, assert_same_file, catches, comm_entry, episode_rows,
-    first_gap, mean_length, notes, read, read_trace, run_id, scratch, signal, summary, supervise,
-    wait_for_agent, wait_for_records, wait_until, words, world_log, world_pids, Spawned, AGENT,
+    first_gap, mean_length, notes, read, read_trace, run_fail, run_id, scratch, signal, summary,
+    supervise, wait_for_agent, wait_for_records, wait_until, words, world_log, world_pids, Spawned,
+    AGENT, WORLD,
 };
 use flockstep_agents::node::EXIT_WORLD_GONE;
 use flockstep_agents::snapshot::Snapshot;
@@ -15,6 +16,7 @@ use flockstep_proto::transport::{
 };
 use flockstep_proto::{Action, JoinRequest, ANY_SLOT};
 use flockstep_supervisor::interrupt::HURRY_AFTER;
+use std::os::unix::process::ExitStatusExt;
 use std::time::{Duration, Instant};
 
 const DEADLOCK: Duration = Duration::from_secs(120);
@@ -447,6 +449,35 @@ fn a_killed_world_ends_the_run_at_once_and_keeps_the_results() {
     assert_nothing_left(&id);
 }
 
+/// A world started by hand, with no supervisor to sweep after it, that is SIGKILLed leaves
+/// its services behind. A world started again with its run id removes them and goes on
+/// (here to wait for agents that never come), instead of refusing the run id as a live
+/// run's (it did: "service ... already exists: another live run uses this run id").
+#[test]
+fn a_world_started_after_a_killed_one_of_its_run_removes_what_it_left() {
+    let id = run_id("reworld");
+    let args = |startup_ms: &'static str| {
+        let mut args = words(
+            "--scenario s1 --uavs 1 --trials 1 --seed 1 --episodes 10 --eval-episodes 0 \
+             --tick-cap 100 --comm none --alpha 0.1 --gamma 0.9 --epsilon 0.1",
+        );
+        args.extend(["--run-id", &id, "--startup-timeout-ms", startup_ms]);
+        args
+    };
+    let first = Spawned::start(WORLD, &args("60000"));
+    wait_until("the first world to create its services", Duration::from_secs(30), || {
+        RunServices::is_served(&id).expect("look for the run's services")
+    });
+    signal(first.pid(), libc::SIGKILL);
+    let (killed, _) = first.finish(Duration::from_secs(10));
+    assert_eq!(killed.status.signal(), Some(libc::SIGKILL));
+
+    let (_, report) = run_fail(WORLD, &args("200"));
+    // Past creating the services: it waited for its peers, who never came.
+    assert!(report.contains("peers did not connect within"), "{report}");
+    assert_nothing_left(&id);
+}
+
 /// An attached agent is no child of the supervisor, which cannot bring it down when the
 /// world dies: it notices by itself that the world's process is gone, long before its
 /// `--world-timeout-ms` (it used to wait that out, 30 s by default), and leaves with its
@@ -698,7 +729,7 @@ fn a_run_id_a_live_run_uses_is_refused_at_once() {
     ));
     wait_for_agent(&id, 2);
     let second_out = second.path().join("b");
-    let (refused, report) = crate::harness::run_fail(
+    let (refused, report) = run_fail(
         crate::harness::SUPERVISOR,
         &[&["--run-id", &id, "--episodes", "10", "--out"][..], &[&*second_out.to_string_lossy()]]
             .concat(),

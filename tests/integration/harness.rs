@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 pub const SUPERVISOR: &str = env!("CARGO_BIN_EXE_supervisor");
 pub const AGENT: &str = env!("CARGO_BIN_EXE_agent");
+pub const WORLD: &str = env!("CARGO_BIN_EXE_world");
 
 /// The words of `text`: long argument lists read better as one string.
 pub fn words(text: &str) -> Vec<&str> {

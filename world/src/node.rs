@@ -14,8 +14,8 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use flockstep_proto::supervisor_to_world::Control;
 use flockstep_proto::transport::{
-    exit_with_parent, process_stat, RunConfig, RunServices, SenderNode, SignalMode, TransportError,
-    WorldPorts, LOOK_FOR_GONE_AGENTS,
+    cleanup_run, exit_with_parent, process_stat, RunConfig, RunServices, SenderNode, SignalMode,
+    TransportError, WorldPorts, LOOK_FOR_GONE_AGENTS,
 };
 use flockstep_proto::{
     slots_in, JoinRequest, Membership, ObservationKind, Refusal, RunInfo, ANY_SLOT, MAX_AGENTS,
@@ -115,6 +115,10 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         tick_cap: args.tick_cap,
     };
     let world = World::new(Arc::new(scenario), args.uavs, args.trials, args.seed, config)?;
+    // A world of this run id that died with no supervisor to sweep after it (one started by
+    // hand) left its services, which would read as a live run's: remove what dead processes
+    // of the run left first. A live run's services stay, and creating them then fails.
+    cleanup_run(&run.run_id)?;
     let ports = RunServices::create(&run)?.into_world()?;
     ports.publish_run_info(&run_info(args)?)?;
     let startup = Duration::from_millis(args.startup_timeout_ms);

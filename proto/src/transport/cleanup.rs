@@ -26,7 +26,8 @@ pub struct RunCleanup {
     /// keeps its node-id counter segment.
     pub live_nodes: usize,
     /// Files of the run removed besides the nodes' own: empty segments and, once no node was
-    /// left, every segment and socket no process used (the node-id counter among them).
+    /// left, every segment, socket and service description no process used (the node-id
+    /// counter among them).
     pub files: usize,
     /// Empty node directories of processes that died as they created them, of any run of
     /// this user (see [`remove_abandoned_node_dirs`]).
@@ -96,20 +97,26 @@ pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportErro
     Ok(removed)
 }
 
-/// Removes the run's segments that no process has open or mapped, and its listener sockets
-/// without a segment: called once no node of the run is left. Among them is the node-id
-/// counter (`*.global_mgmt`), which iceoryx2 never removes, and what a process killed as it
-/// created a port left before iceoryx2 recorded the port, named by nothing but the run's
-/// prefix: a listener's segment (`*.event_mgmt`) and socket (`*.event` under the root), 1
-/// of about 250 agents killed 0 to 40 ms after they started; a lone socket and a
-/// publisher-subscriber `*.connection` segment, 1 each in about 400 more.
+/// Removes the run's segments and service descriptions that no process has open or mapped,
+/// and its listener sockets without a segment: called once no node of the run is left.
+/// Among them is the node-id counter (`*.global_mgmt`), which iceoryx2 never removes, and
+/// what a process killed as it created a port left before iceoryx2 recorded the port, named
+/// by nothing but the run's prefix: a listener's segment (`*.event_mgmt`) and socket
+/// (`*.event` under the root), 1 of about 250 agents killed 0 to 40 ms after they started; a
+/// lone socket and a publisher-subscriber `*.connection` segment, 1 each in about 400 more.
+/// And the description (`*.service` in the service directory) of a service whose creator
+/// was killed after writing it and before creating the service's segment: iceoryx2's
+/// clean-up of the dead node leaves it, and the next world of the run id failed to create
+/// the service, as if a live run held it (3 of 10 worlds killed as their first service
+/// appeared).
 ///
 /// A process holds every segment it creates open until it has mapped it, and keeps it mapped
-/// while it uses it (iceoryx2 closes the descriptor once it is mapped), so one that no
-/// process has open or mapped is no one's, even with a run of the same id starting
-/// meanwhile. A listener creates its segment, then its socket, and removes the segment,
-/// then the socket, when dropped: a socket without a segment is no one's either. Returns
-/// how many files were removed.
+/// while it uses it (iceoryx2 closes the descriptor once it is mapped); it holds a service's
+/// description open from its creation, or its opening, as long as it uses the service. So
+/// one that no process has open or mapped is no one's, even with a run of the same id
+/// starting meanwhile. A listener creates its segment, then its socket, and removes the
+/// segment, then the socket, when dropped: a socket without a segment is no one's either.
+/// Returns how many files were removed.
 fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, TransportError> {
     let prefix = run_prefix(run_id);
     let uid = effective_uid();
@@ -118,6 +125,14 @@ fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, Transport
         let segment = StdPath::new(SHM_DIR).join(&name);
         if name.starts_with(&prefix) && !in_use(&segment) {
             remove_file(&segment)?;
+            removed += 1;
+        }
+    }
+    let service_dir = std_path(&config.global.service_dir());
+    for name in names_owned_by(&service_dir, uid)? {
+        let description = service_dir.join(&name);
+        if name.starts_with(&prefix) && !in_use(&description) {
+            remove_file(&description)?;
             removed += 1;
         }
     }
