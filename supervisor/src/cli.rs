@@ -365,8 +365,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub snapshot_every: Option<u64>,
     /// Test aid (shm only), off by default: `N=SPEC` makes agent N misbehave; SPEC is
-    /// `crash-before-join`, `join-after-file=PATH`, `crash-at-round=R`, `hang-at-round=R` or
-    /// `ignore-sigterm` (several separated by commas).
+    /// `crash-before-join`, `join-after-file=PATH`, `crash-at-round=R`, `hang-at-round=R`,
+    /// `hang-at-stop` or `ignore-sigterm` (several separated by commas).
     #[arg(long = "fault", hide = true)]
     pub faults: Vec<String>,
     /// Test aid (shm only): each agent writes a per-round trace `uav<N>.trace.csv` here.
