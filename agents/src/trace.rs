@@ -2,10 +2,11 @@
 //! test check lockstep from outside: which rounds each agent ticked, and what it knew of
 //! its peers in each of them.
 //!
-//! CSV columns: `round,kind,trial,episode,episode_tick,sent_waypoint,sent_sees,comm`, one line
-//! per round and trial; `kind` is `tick` or `stop`; `comm` is the agent's communication
-//! words after taking in the round's relayed flags, as hex, `-`-separated (empty in mode
-//! `none`).
+//! CSV columns: `round,kind,trial,episode,episode_tick,member,sent_waypoint,sent_sees,comm`,
+//! one line per round and trial; `kind` is `tick` or `stop`; `member` is 1 if the world
+//! counts the agent in the trial's episode (an agent that attached joins at the next
+//! episode start); `comm` is the agent's communication words after taking in the round's
+//! relayed flags, as hex, `-`-separated (empty in mode `none`).
 
 use crate::agent::UavAgent;
 use anyhow::{Context, Result};
@@ -23,7 +24,10 @@ impl Trace {
         let file = File::create(path)
             .with_context(|| format!("cannot create trace {}", path.display()))?;
         let mut file = BufWriter::new(file);
-        writeln!(file, "round,kind,trial,episode,episode_tick,sent_waypoint,sent_sees,comm")?;
+        writeln!(
+            file,
+            "round,kind,trial,episode,episode_tick,member,sent_waypoint,sent_sees,comm"
+        )?;
         Ok(Trace { file })
     }
 
@@ -35,15 +39,16 @@ impl Trace {
     ) -> Result<()> {
         let kind = if observation.kind == ObservationKind::Stop as u8 { "stop" } else { "tick" };
         for (k, part) in agent.trials().iter().enumerate() {
-            let trial = &observation.trials[k];
+            let trial = observation.trial(k);
             let flags = &action.trials[k].flags;
             let comm: Vec<String> = part.comm().words().iter().map(|w| format!("{w:x}")).collect();
             writeln!(
                 self.file,
-                "{},{kind},{k},{},{},{},{},{}",
+                "{},{kind},{k},{},{},{},{},{},{}",
                 observation.round,
-                trial.episode,
-                trial.episode_tick,
+                trial.header.episode,
+                trial.header.episode_tick,
+                trial.agents[agent.slot()].member,
                 flags.waypoint,
                 flags.sees_target,
                 comm.join("-")

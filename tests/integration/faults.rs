@@ -100,8 +100,12 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     ));
     // The run is under way once its last starting agent is.
     wait_for_agent(&id, 2);
-    let (attached, attach_report) =
-        Spawned::start(AGENT, &["--attach", &id, "--out", &out]).finish(DEADLOCK);
+    let attached_trace = traces.join("uav3.trace.csv");
+    let (attached, attach_report) = Spawned::start(
+        AGENT,
+        &["--attach", &id, "--out", &out, "--trace", &attached_trace.display().to_string()],
+    )
+    .finish(DEADLOCK);
     assert!(attached.status.success(), "{attach_report}");
     // The one who started it is told that it is done, and where its tables are.
     let said = String::from_utf8_lossy(&attached.stderr);
@@ -110,6 +114,7 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
     let (status, report) = run.finish(DEADLOCK);
     assert!(status.status.success(), "{report}");
     let rows = episode_rows(dir.path());
+    let attached_rounds = read_trace(&attached_trace);
     for trial in 0..2 {
         let third: Vec<[u64; 6]> =
             rows.iter().filter(|r| r[0] == trial && r[1] == 3).copied().collect();
@@ -118,14 +123,24 @@ fn an_attached_agent_is_admitted_at_an_episode_boundary_learns_and_is_heard() {
             "trial {trial}: UAV3 took part in only {} episodes",
             third.len()
         );
-        // Admitted at an episode boundary: its first episode starts when UAV1's does.
         let first = &third[0];
         assert!(first[2] > 0, "UAV3 was there from the start: it did not attach");
-        let uav1 = rows
+        // Admitted at an episode boundary: the world counts it in from the first tick of the
+        // episode its first record is of, and not before.
+        let joined = attached_rounds
             .iter()
-            .find(|r| r[0] == trial && r[1] == 1 && r[2] == first[2])
-            .expect("UAV1 row of that episode");
-        assert_eq!(uav1[3], first[3], "UAV3's first episode does not start at an episode boundary");
+            .find(|r| r.trial == trial && r.member)
+            .unwrap_or_else(|| panic!("trial {trial}: UAV3's trace has no round as a member"));
+        assert_eq!(
+            (joined.episode, joined.episode_tick),
+            (first[2], 0),
+            "trial {trial}: UAV3 joined episode {} at its tick {} (round {}); its first \
+             record is of episode {}",
+            joined.episode,
+            joined.episode_tick,
+            joined.round,
+            first[2]
+        );
         // It learns: its last episodes are shorter than its first ones.
         let (head, tail) = (mean_length(&third[..100]), mean_length(&third[third.len() - 100..]));
         assert!(tail < head, "trial {trial}: UAV3 did not learn ({head} -> {tail})");

@@ -442,6 +442,8 @@ pub struct TraceRow {
     pub trial: u64,
     pub episode: u64,
     pub episode_tick: u64,
+    /// Whether the world counts the agent in the trial's episode this round.
+    pub member: bool,
     /// The flags the agent sent this round: the waypoint (0-based) and whether it saw the
     /// target from there.
     pub sent_waypoint: usize,
@@ -456,14 +458,14 @@ pub fn read_trace(path: &Path) -> Vec<TraceRow> {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("round,kind,trial,episode,episode_tick,sent_waypoint,sent_sees,comm"),
+        Some("round,kind,trial,episode,episode_tick,member,sent_waypoint,sent_sees,comm"),
         "{} has another header",
         path.display()
     );
     lines
         .map(|line| {
             let f: Vec<&str> = line.split(',').collect();
-            assert_eq!(f.len(), 8, "malformed trace line `{line}` in {}", path.display());
+            assert_eq!(f.len(), 9, "malformed trace line `{line}` in {}", path.display());
             let num = |i: usize| {
                 f[i].parse::<u64>().unwrap_or_else(|e| panic!("`{line}` field {i}: {e}"))
             };
@@ -472,7 +474,7 @@ pub fn read_trace(path: &Path) -> Vec<TraceRow> {
                 "stop" => true,
                 kind => panic!("`{line}`: unknown kind `{kind}`"),
             };
-            let comm = match f[7] {
+            let comm = match f[8] {
                 "" => vec![],
                 words => words
                     .split('-')
@@ -485,8 +487,9 @@ pub fn read_trace(path: &Path) -> Vec<TraceRow> {
                 trial: num(2),
                 episode: num(3),
                 episode_tick: num(4),
-                sent_waypoint: num(5) as usize,
-                sent_sees: num(6),
+                member: num(5) == 1,
+                sent_waypoint: num(6) as usize,
+                sent_sees: num(7),
                 comm,
             }
         })
