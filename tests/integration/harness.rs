@@ -226,6 +226,23 @@ fn descendants(pid: u32) -> Vec<u32> {
     found
 }
 
+/// SIGKILLs `child` and its descendants, and reaps it. The supervisor's children run in
+/// process groups of their own and, when it dies, get only SIGTERM (their parent-death
+/// signal): an agent that ignores SIGTERM (`--fault N=ignore-sigterm`) would outlive a failed
+/// test. The process is stopped first, so that it starts no new child while its descendants
+/// are listed, and they are listed while they are still its children (an orphan's parent is
+/// init).
+pub fn kill_tree(child: &mut Child) -> ExitStatus {
+    let pid = child.id();
+    signal(pid, libc::SIGSTOP);
+    let descendants = descendants(pid);
+    let _ = child.kill();
+    for descendant in descendants {
+        signal(descendant, libc::SIGKILL);
+    }
+    child.wait().expect("wait on the killed process")
+}
+
 /// Polls `condition` every 10 ms for at most `timeout`; panics with `what` if it never holds.
 pub fn wait_until(what: &str, timeout: Duration, mut condition: impl FnMut() -> bool) {
     let start = Instant::now();
@@ -312,20 +329,8 @@ impl Spawned {
     }
 
     /// SIGKILLs the running process and every process under it; returns its exit status.
-    /// The supervisor's children run in process groups of their own and, when it dies, get
-    /// only SIGTERM (their parent-death signal): an agent that ignores SIGTERM (`--fault
-    /// N=ignore-sigterm`) would outlive a failed test. The process is stopped first, so that
-    /// it starts no new child while its descendants are listed, and they are listed while
-    /// they are still its children (an orphan's parent is init).
     fn kill_tree(&mut self) -> ExitStatus {
-        let pid = self.pid();
-        signal(pid, libc::SIGSTOP);
-        let descendants = descendants(pid);
-        let _ = self.child.kill();
-        for descendant in descendants {
-            signal(descendant, libc::SIGKILL);
-        }
-        self.child.wait().expect("wait on the killed process")
+        kill_tree(&mut self.child)
     }
 
     /// Whether the process has exited (its status is kept for [`Self::finish`]).

@@ -19,3 +19,5 @@ mod learning;
 mod shm;
 /// Evaluating and resuming from Q-table snapshots.
 mod snapshots;
+/// The progress bar on a terminal.
+mod terminal;
