@@ -13,8 +13,8 @@ use flockstep_supervisor::results::RUN_OUTPUTS;
 use std::time::Duration;
 
 /// Runs the supervisor with `args` on both transports (10 episodes unless `args` give
-/// `--episodes`), results into `out`; `check` looks at the error line. Nothing of the run
-/// may be left behind.
+/// `--episodes`), results into `out`, a directory no run wrote to; `check` looks at the error
+/// line. No process of the run may have started, and nothing of it may be left behind.
 fn fails_on_both_transports(out: &str, args: &[&str], check: impl Fn(&str, &str)) {
     let id = run_id("bad-input");
     for transport in ["inproc", "shm"] {
@@ -23,7 +23,11 @@ fn fails_on_both_transports(out: &str, args: &[&str], check: impl Fn(&str, &str)
         if !args.contains(&"--episodes") {
             all.extend(["--episodes", "10"]);
         }
-        check(&error_line(&all), transport);
+        let line = error_line(&all);
+        check(&line, transport);
+        // `out` would hold the processes' logs had any started.
+        let logs = std::path::Path::new(out).join("logs");
+        assert!(!logs.exists(), "a process of the run started ({transport}): {line}");
         assert_nothing_left(&id);
     }
 }

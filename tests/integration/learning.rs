@@ -45,7 +45,10 @@ fn greedy(scenario: &str, uavs: &str, comm: &str, episodes: &str) -> f64 {
 #[test]
 fn s1_greedy_policy_reaches_the_exact_optimum() {
     let best = memoryless_optimum("s1");
-    assert_eq!(best, 13.0, "SPEC: the s1 optimum is 13 ticks");
+    assert_eq!(
+        best, 13.0,
+        "the s1 optimum under SPEC semantics is 13 ticks (derived in world/tests/world/optimum.rs)"
+    );
     let greedy = greedy("s1", "1", "none", "3000");
     assert_eq!(greedy, best);
 }

@@ -9,6 +9,10 @@ use crate::harness::{
 use flockstep_agents::snapshot::{read_snapshot, snapshot_path};
 use std::time::Duration;
 
+/// On s2, whose two targets are drawn at random, `eval` of as many episodes as the run's
+/// own final evaluation (1000, both by default) flies the same episodes, so its greedy
+/// length is the run's to the last digit: a different draw of targets, seed or tables
+/// would show.
 #[test]
 fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
     let dir = scratch();
@@ -18,7 +22,7 @@ fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
             "--transport",
             "inproc",
             "--scenario",
-            "s1",
+            "s2",
             "--uavs",
             "1",
             "--episodes",
@@ -39,7 +43,7 @@ fn eval_reproduces_the_greedy_result_of_the_run_in_both_transports() {
                 "--qtables",
                 &qtables,
                 "--episodes",
-                "200",
+                "1000",
                 "--transport",
                 transport,
                 "--out",
@@ -90,9 +94,14 @@ fn resume_continues_from_the_learned_level() {
     assert_eq!(supervise(fresh.path(), &continued)["resume"], serde_json::Value::Null);
     let (resumed, scratch_mean) =
         (mean_length(&episode_rows(second.path())), mean_length(&episode_rows(fresh.path())));
+    // Where the first run left off: its last 200 episodes (of every trial).
+    let learned: Vec<[u64; 6]> =
+        episode_rows(first.path()).into_iter().filter(|row| row[2] >= 2800).collect();
+    let learned = mean_length(&learned);
     assert!(
-        resumed < 20.0 && resumed < scratch_mean / 2.0,
-        "resumed {resumed} vs from scratch {scratch_mean}"
+        resumed < learned * 1.25 && resumed < scratch_mean / 2.0,
+        "resumed {resumed} vs where the first run left off {learned} and from scratch \
+         {scratch_mean}"
     );
 }
 

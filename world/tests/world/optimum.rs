@@ -33,6 +33,9 @@ fn assert_consistent(s: &Scenario, uav: usize, best: &Optimum) {
 
 #[test]
 fn scenario_1_takes_13_ticks() {
+    // From wp1 low facing N: three rotations to face W (ticks 0-2), nine translations to wp10
+    // (ticks 3-11), where T1, the only target, is in sight at tick 12: 13 ticks with the
+    // episode's end. (The pose below is 0-based: waypoint 9 is wp10.)
     let s1 = scenario("s1");
     let best = optimum(&s1, 0).expect("optimum");
     assert_eq!((best.expected_ticks, best.lengths.as_slice()), (13.0, &[13][..]));
