@@ -188,7 +188,9 @@ fn sigkilled_agents_never_deadlock_the_survivors() {
         ));
         wait_for_agent(&id, 2);
         // At a random point of the training, which writes about 80 kB of records here (in
-        // steps of the writer's 8 KiB buffer): between none and half of them.
+        // steps of the writer's 8 KiB buffer): between none and half of them, so in the
+        // first few thousand rounds at the earliest (agents killed as they start:
+        // `agents_killed_as_they_start_never_hang_the_run`).
         wait_for_records(&dir.path().join("episodes.csv"), random.below(40_000), DEADLOCK);
         let uav2 = agent_pids(&id, 2);
         assert!(!uav2.is_empty(), "attempt {attempt}: UAV2 had already left, half-way through");

@@ -115,10 +115,18 @@ pub fn run(args: &WorldArgs) -> Result<()> {
         tick_cap: args.tick_cap,
     };
     let world = World::new(Arc::new(scenario), args.uavs, args.trials, args.seed, config)?;
-    // A world of this run id that died with no supervisor to sweep after it (one started by
-    // hand) left its services, which would read as a live run's: remove what dead processes
-    // of the run left first. A live run's services stay, and creating them then fails.
-    cleanup_run(&run.run_id)?;
+    // A world started by hand has no supervisor to sweep before it (`supervisor::shm::prepare`):
+    // what a killed world of its run id left, its services among them, would read as a live
+    // run's. A live run's services stay, and creating them then fails. Best effort: what
+    // cannot be removed shows as the create's own error.
+    if args.parent_pid.is_none() {
+        if let Err(e) = cleanup_run(&run.run_id) {
+            tracing::warn!(
+                "could not remove what earlier processes of run `{}` left: {e}",
+                run.run_id
+            );
+        }
+    }
     let ports = RunServices::create(&run)?.into_world()?;
     ports.publish_run_info(&run_info(args)?)?;
     let startup = Duration::from_millis(args.startup_timeout_ms);

@@ -25,9 +25,9 @@ pub struct RunCleanup {
     /// Nodes alive, or that could not be inspected or removed; while there are any, the run
     /// keeps its node-id counter segment.
     pub live_nodes: usize,
-    /// Files of the run removed besides the nodes' own: empty segments and, once no node was
-    /// left, every segment, socket and service description no process used (the node-id
-    /// counter among them).
+    /// Files of the run removed besides the nodes' own: empty segments, service descriptions
+    /// left in creation and, once no node was left, every segment and socket no process used
+    /// (the node-id counter among them).
     pub files: usize,
     /// Empty node directories of processes that died as they created them, of any run of
     /// this user (see [`remove_abandoned_node_dirs`]).
@@ -36,6 +36,7 @@ pub struct RunCleanup {
 
 /// Removes what a run left behind: the resources of its dead nodes, what iceoryx2 never
 /// removes of a process killed as it created a file (see [`remove_empty_segments`],
+/// [`remove_descriptions_left_in_creation`],
 /// [`remove_nodes_that_died_starting`], [`remove_node_without_details`],
 /// [`remove_abandoned_node_dirs`]) and, once no node of the run is left, every file of the
 /// run no process uses ([`remove_unused_files`]), among them the per-prefix node-id counter
@@ -44,7 +45,8 @@ pub struct RunCleanup {
 pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
     let config = super::iceoryx_config(run_id)?;
     let mut report = RunCleanup {
-        files: remove_empty_segments(run_id)?,
+        files: remove_empty_segments(run_id)?
+            + remove_descriptions_left_in_creation(&config, run_id)?,
         dead_nodes: remove_nodes_that_died_starting(&config, &run_prefix(run_id))?,
         live_nodes: 0,
         abandoned_node_dirs: remove_abandoned_node_dirs(&config)?,
@@ -97,26 +99,50 @@ pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportErro
     Ok(removed)
 }
 
-/// Removes the run's segments and service descriptions that no process has open or mapped,
-/// and its listener sockets without a segment: called once no node of the run is left.
-/// Among them is the node-id counter (`*.global_mgmt`), which iceoryx2 never removes, and
-/// what a process killed as it created a port left before iceoryx2 recorded the port, named
-/// by nothing but the run's prefix: a listener's segment (`*.event_mgmt`) and socket
-/// (`*.event` under the root), 1 of about 250 agents killed 0 to 40 ms after they started; a
-/// lone socket and a publisher-subscriber `*.connection` segment, 1 each in about 400 more.
-/// And the description (`*.service` in the service directory) of a service whose creator
-/// was killed after writing it and before creating the service's segment: iceoryx2's
-/// clean-up of the dead node leaves it, and the next world of the run id failed to create
-/// the service, as if a live run held it (3 of 10 worlds killed as their first service
-/// appeared).
+/// Removes the run's service descriptions (`*.service` in iceoryx2's service directory) that
+/// a creator killed as it made them left writable, which no process has open. iceoryx2
+/// creates a description writable (0600), holds it open from that exclusive create on for
+/// as long as the service lives, writes it, and makes it read-only (0400) once complete; it
+/// reads a writable one as a service still being created. So its clean-up of the dead
+/// creator removes only the service's tag, and every later create of the service waits for
+/// the creation to end and fails as if the service existed: a world started by hand after
+/// one of its run id was killed as it created its services said "another live run uses
+/// this run id" (3 of 10 worlds killed as their first service appeared). A description
+/// being created is held open by its creator, so one that is writable and that no process
+/// has open is no one's, with live nodes in the run or not. Returns how many were removed.
+fn remove_descriptions_left_in_creation(
+    config: &Config,
+    run_id: &str,
+) -> Result<usize, TransportError> {
+    let prefix = run_prefix(run_id);
+    let service_dir = std_path(&config.global.service_dir());
+    let mut removed = 0;
+    for name in names_owned_by(&service_dir, effective_uid())? {
+        let description = service_dir.join(&name);
+        let writable =
+            std::fs::metadata(&description).is_ok_and(|m| m.is_file() && m.mode() & 0o200 != 0);
+        if name.starts_with(&prefix) && writable && !in_use(&description) {
+            remove_file(&description)?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// Removes the run's segments that no process has open or mapped, and its listener sockets
+/// without a segment: called once no node of the run is left. Among them is the node-id
+/// counter (`*.global_mgmt`), which iceoryx2 never removes, and what a process killed as it
+/// created a port left before iceoryx2 recorded the port, named by nothing but the run's
+/// prefix: a listener's segment (`*.event_mgmt`) and socket (`*.event` under the root), 1
+/// of about 250 agents killed 0 to 40 ms after they started; a lone socket and a
+/// publisher-subscriber `*.connection` segment, 1 each in about 400 more.
 ///
 /// A process holds every segment it creates open until it has mapped it, and keeps it mapped
-/// while it uses it (iceoryx2 closes the descriptor once it is mapped); it holds a service's
-/// description open from its creation, or its opening, as long as it uses the service. So
-/// one that no process has open or mapped is no one's, even with a run of the same id
-/// starting meanwhile. A listener creates its segment, then its socket, and removes the
-/// segment, then the socket, when dropped: a socket without a segment is no one's either.
-/// Returns how many files were removed.
+/// while it uses it (iceoryx2 closes the descriptor once it is mapped), so one that no
+/// process has open or mapped is no one's, even with a run of the same id starting
+/// meanwhile. A listener creates its segment, then its socket, and removes the segment,
+/// then the socket, when dropped: a socket without a segment is no one's either. Returns
+/// how many files were removed.
 fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, TransportError> {
     let prefix = run_prefix(run_id);
     let uid = effective_uid();
@@ -125,14 +151,6 @@ fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, Transport
         let segment = StdPath::new(SHM_DIR).join(&name);
         if name.starts_with(&prefix) && !in_use(&segment) {
             remove_file(&segment)?;
-            removed += 1;
-        }
-    }
-    let service_dir = std_path(&config.global.service_dir());
-    for name in names_owned_by(&service_dir, uid)? {
-        let description = service_dir.join(&name);
-        if name.starts_with(&prefix) && !in_use(&description) {
-            remove_file(&description)?;
             removed += 1;
         }
     }
