@@ -7,23 +7,48 @@ use crate::harness::{
     assert_nothing_left, kill_tree, run_id, scratch, words, RUN_BOUND, SUPERVISOR,
 };
 use std::io::Read;
-use std::os::fd::{FromRawFd, OwnedFd};
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 
 /// A pseudo-terminal of 200 columns, wider than any frame: its controller (read by the test)
-/// and its device (the process's stderr).
+/// and its device (the process's stderr). Both close on exec, so no other process this test
+/// binary starts, on any thread, holds them; the supervisor gets the device as its stderr
+/// alone (`dup2` clears the flag there).
 fn open_terminal() -> (OwnedFd, OwnedFd) {
-    let (mut controller, mut device) = (-1, -1);
+    let flags = libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC;
+    let failed = |what: &str| panic!("{what} failed: {}", std::io::Error::last_os_error());
+    // SAFETY: opens a new pseudo-terminal controller; nothing else owns the descriptor.
+    let controller = unsafe { libc::posix_openpt(flags) };
+    if controller < 0 {
+        failed("posix_openpt");
+    }
+    // SAFETY: a fresh, open descriptor owned from here on.
+    let controller = unsafe { OwnedFd::from_raw_fd(controller) };
+    let fd = controller.as_raw_fd();
+    let mut name = [0 as libc::c_char; 128];
+    // SAFETY: calls on the open controller; `name` is a writable buffer of the given length.
+    unsafe {
+        if libc::grantpt(fd) != 0 || libc::unlockpt(fd) != 0 {
+            failed("grantpt/unlockpt");
+        }
+        if libc::ptsname_r(fd, name.as_mut_ptr(), name.len()) != 0 {
+            failed("ptsname_r");
+        }
+    }
+    // SAFETY: `name` is the NUL-terminated path ptsname_r wrote.
+    let device = unsafe { libc::open(name.as_ptr(), flags) };
+    if device < 0 {
+        failed("opening the terminal device");
+    }
+    // SAFETY: a fresh, open descriptor owned from here on.
+    let device = unsafe { OwnedFd::from_raw_fd(device) };
     let size = libc::winsize { ws_row: 40, ws_col: 200, ws_xpixel: 0, ws_ypixel: 0 };
-    // SAFETY: two out-pointers to local ints and a valid window size; no name buffer and
-    // default terminal settings (null pointers), as openpty allows.
-    let rc = unsafe {
-        libc::openpty(&mut controller, &mut device, std::ptr::null_mut(), std::ptr::null(), &size)
-    };
-    assert_eq!(rc, 0, "openpty failed: {}", std::io::Error::last_os_error());
-    // SAFETY: openpty succeeded, so both are open descriptors that nothing else owns.
-    unsafe { (OwnedFd::from_raw_fd(controller), OwnedFd::from_raw_fd(device)) }
+    // SAFETY: sets the window size of the open device from a valid `winsize`.
+    if unsafe { libc::ioctl(device.as_raw_fd(), libc::TIOCSWINSZ, &size) } != 0 {
+        failed("setting the terminal's size");
+    }
+    (controller, device)
 }
 
 /// Kills the process and its descendants when dropped while it runs, so a failed test
@@ -47,7 +72,8 @@ fn run_on_terminal(args: &[&str]) -> (std::process::ExitStatus, String) {
         let mut cmd = Command::new(SUPERVISOR);
         cmd.args(args).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::from(device));
         // The command, and with it this process's copy of the device, goes at the block's
-        // end: the child's copies are then the only ones.
+        // end: the supervisor's stderr is then the only copy (its children write theirs to
+        // log files).
         cmd.spawn().unwrap_or_else(|e| panic!("cannot start {SUPERVISOR}: {e}"))
     };
     let mut child = KillOnDrop(child);
@@ -57,8 +83,13 @@ fn run_on_terminal(args: &[&str]) -> (std::process::ExitStatus, String) {
         let mut seen = Vec::new();
         let mut chunk = [0u8; 4096];
         // Linux ends the reads with EIO once no process holds the device.
-        while let Ok(n @ 1..) = terminal.read(&mut chunk) {
-            seen.extend_from_slice(&chunk[..n]);
+        loop {
+            match terminal.read(&mut chunk) {
+                Ok(0) => break,
+                Ok(n) => seen.extend_from_slice(&chunk[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => break,
+            }
         }
         let _ = sent.send(seen);
     });
