@@ -58,27 +58,37 @@ fn an_agent_asking_for_a_route_it_cannot_have_exits_at_once_saying_why() {
 
 /// `agent --attach` to a run id that no world serves waits `--world-timeout-ms` for the
 /// run's services, then exits with one line naming the run id and the flag. Before, it
-/// waited a fixed 10 s whatever the flag said.
+/// waited a fixed 10 s whatever the flag said: a second timeout a second longer must make
+/// the wait at least a second longer (no bound on how long either takes).
 #[test]
 fn attaching_to_a_run_that_is_not_running_waits_the_world_timeout() {
     let dir = scratch();
-    let (id, out) = (run_id("absent"), dir.path().display().to_string());
-    let timeout = Duration::from_millis(300);
-    let timeout_ms = timeout.as_millis().to_string();
-    let args = ["--attach", &id, "--out", &out, "--world-timeout-ms", &timeout_ms];
-    let started = Instant::now();
-    let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
-    let waited = started.elapsed();
-    assert!(!output.status.success(), "expected a failure\n{report}");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let expected = format!(
-        "agent: error: run `{id}`: not running: no world created its services \
-         within {timeout_ms}ms (--world-timeout-ms)"
+    let out = dir.path().display().to_string();
+    let waited = |timeout: Duration| {
+        let id = run_id("absent");
+        let timeout_ms = timeout.as_millis().to_string();
+        let args = ["--attach", &id, "--out", &out, "--world-timeout-ms", &timeout_ms];
+        let started = Instant::now();
+        let (output, report) = Spawned::start(AGENT, &args).finish(BOUND);
+        let waited = started.elapsed();
+        assert!(!output.status.success(), "expected a failure\n{report}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let expected = format!(
+            "agent: error: run `{id}`: not running: no world created its services \
+             within {timeout:?} (--world-timeout-ms)"
+        );
+        assert_eq!(stderr.trim(), expected, "\n{report}");
+        // At least the timeout it was given (`waited` also holds the process's start).
+        assert!(waited >= timeout, "gave up after {waited:?}, before {timeout:?}\n{report}");
+        assert_nothing_left(&id);
+        waited
+    };
+    let (short, long) = (Duration::from_millis(300), Duration::from_millis(1300));
+    let (short_wait, long_wait) = (waited(short), waited(long));
+    assert!(
+        long_wait.saturating_sub(short_wait) >= long - short - Duration::from_millis(100),
+        "a {long:?} timeout waited {long_wait:?}, a {short:?} one {short_wait:?}"
     );
-    assert_eq!(stderr.trim(), expected, "\n{report}");
-    // It waited at least the timeout it was given (`waited` also holds the process's start).
-    assert!(waited >= timeout, "the agent gave up after {waited:?}, before {timeout:?}\n{report}");
-    assert_nothing_left(&id);
 }
 
 /// An attaching agent whose `--resume` names no directory, or whose `--bt` tree is bad,
