@@ -86,17 +86,7 @@ pub fn cleanup_run(run_id: &str) -> Result<RunCleanup, TransportError> {
 /// (4 of about 1 000 agents killed 0 to 40 ms after they started). A segment still being
 /// created is empty too, but its creator holds it open. Returns how many were removed.
 pub(super) fn remove_empty_segments(run_id: &str) -> Result<usize, TransportError> {
-    let prefix = run_prefix(run_id);
-    let mut removed = 0;
-    for name in names_owned_by(StdPath::new(SHM_DIR), effective_uid())? {
-        let path = StdPath::new(SHM_DIR).join(&name);
-        let empty = std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == 0);
-        if name.starts_with(&prefix) && empty && !in_use(&path) {
-            remove_file(&path)?;
-            removed += 1;
-        }
-    }
-    Ok(removed)
+    remove_unused(StdPath::new(SHM_DIR), run_id, |m| m.is_file() && m.len() == 0)
 }
 
 /// Removes the run's service descriptions (`*.service` in iceoryx2's service directory) that
@@ -114,19 +104,8 @@ fn remove_descriptions_left_in_creation(
     config: &Config,
     run_id: &str,
 ) -> Result<usize, TransportError> {
-    let prefix = run_prefix(run_id);
     let service_dir = std_path(&config.global.service_dir());
-    let mut removed = 0;
-    for name in names_owned_by(&service_dir, effective_uid())? {
-        let description = service_dir.join(&name);
-        let writable =
-            std::fs::metadata(&description).is_ok_and(|m| m.is_file() && m.mode() & 0o200 != 0);
-        if name.starts_with(&prefix) && writable && !in_use(&description) {
-            remove_file(&description)?;
-            removed += 1;
-        }
-    }
-    Ok(removed)
+    remove_unused(&service_dir, run_id, |m| m.is_file() && m.mode() & 0o200 != 0)
 }
 
 /// Removes the run's segments that no process has open or mapped, and its listener sockets
@@ -146,14 +125,7 @@ fn remove_descriptions_left_in_creation(
 fn remove_unused_files(config: &Config, run_id: &str) -> Result<usize, TransportError> {
     let prefix = run_prefix(run_id);
     let uid = effective_uid();
-    let mut removed = 0;
-    for name in names_owned_by(StdPath::new(SHM_DIR), uid)? {
-        let segment = StdPath::new(SHM_DIR).join(&name);
-        if name.starts_with(&prefix) && !in_use(&segment) {
-            remove_file(&segment)?;
-            removed += 1;
-        }
-    }
+    let mut removed = remove_unused(StdPath::new(SHM_DIR), run_id, |_| true)?;
     let socket_suffix =
         String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
     let socket_dir = std_path(config.global.root_path());
@@ -296,6 +268,27 @@ fn in_use(path: &StdPath) -> bool {
         });
         open || std::fs::read_to_string(process.path().join("maps")).is_ok_and(mapped)
     })
+}
+
+/// Removes the files of run `run_id` in `dir` that `left_behind` picks by their metadata and
+/// that no process has open or mapped ([`in_use`]). Returns how many were removed.
+fn remove_unused(
+    dir: &StdPath,
+    run_id: &str,
+    left_behind: impl Fn(&std::fs::Metadata) -> bool,
+) -> Result<usize, TransportError> {
+    let prefix = run_prefix(run_id);
+    let mut removed = 0;
+    for name in names_owned_by(dir, effective_uid())? {
+        let path = dir.join(&name);
+        let picked =
+            name.starts_with(&prefix) && std::fs::metadata(&path).is_ok_and(|m| left_behind(&m));
+        if picked && !in_use(&path) {
+            remove_file(&path)?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
 }
 
 fn remove_file(path: &StdPath) -> Result<(), TransportError> {
