@@ -958,7 +958,8 @@ fn an_empty_segment_of_a_killed_process_does_not_hang_the_clean_up() {
 /// dropped, between its segment and its socket, leaves one) and a `*.connection` segment
 /// (1 each in about 400 more). Once no node of the run is left they are removed; a listener
 /// of a run of the same id starting meanwhile, whose segment is mapped and whose socket is
-/// bound, keeps both. Made here by hand, as iceoryx2 lays them out.
+/// bound, keeps both. So is a finished service description whose service is gone, unless a
+/// process holds it open. Made here by hand, as iceoryx2 lays them out.
 #[test]
 fn files_of_a_run_with_no_node_that_no_process_uses_are_swept() {
     let _sweeps = dead_nodes_lock();
@@ -982,14 +983,32 @@ fn files_of_a_run_with_no_node_that_no_process_uses_are_swept() {
     let connection = segment("abcd_1111_2222.connection");
     let (live_segment, live_socket, live_socket_path) = listener("2222");
     let mapping = Mapping::of(&live_segment);
+    // Finished (read-only) descriptions: one whose service is gone, one a process uses.
+    let services = iceoryx_root().join("services");
+    // As iceoryx2 makes it, on a machine where no service was made yet.
+    std::os::unix::fs::DirBuilderExt::mode(std::fs::DirBuilder::new().recursive(true), 0o750)
+        .create(&services)
+        .unwrap();
+    let description = |hash: &str| {
+        use std::os::unix::fs::PermissionsExt;
+        let path = services.join(format!("{prefix}{hash}.service"));
+        std::fs::write(&path, b"a service's description").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o400)).unwrap();
+        path
+    };
+    let orphaned = description("5555");
+    let used = description("6666");
+    let held_open = std::fs::File::open(&used).unwrap();
 
     let cleaned = cleanup_run(&config.run_id).unwrap();
-    assert_eq!((cleaned.live_nodes, cleaned.files), (0, 4), "{cleaned:?}");
+    assert_eq!((cleaned.live_nodes, cleaned.files), (0, 5), "{cleaned:?}");
     assert!(!killed_segment.exists() && !killed_socket_path.exists(), "the killed listener's");
     assert!(!dropped_socket_path.exists(), "the socket of a listener killed as it was dropped");
     assert!(!connection.exists(), "the connection no process maps");
+    assert!(!orphaned.exists(), "the description no process holds");
     assert!(live_segment.exists() && live_socket_path.exists(), "a live listener's were removed");
-    drop((mapping, live_socket));
+    assert!(used.exists(), "a description a process holds was removed");
+    drop((mapping, live_socket, held_open));
     cleanup_run(&config.run_id).unwrap();
     let after = leftover_files(&config.run_id).unwrap();
     assert!(after.is_empty(), "left behind after clean-up: {after:#?}");
